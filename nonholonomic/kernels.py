@@ -1,0 +1,120 @@
+"""Numeric (numpy) kernels generated from a :class:`~nonholonomic.definition.MechanicalSystem`.
+
+Every function takes states as an array of shape ``(n, dim)`` (rows are phase points, columns the
+flattened state symbols) and the parameter vector in the order of ``system.parameter_symbols``.
+Kernels are compiled once per system and process (``lru_cache``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import sympy as sp
+
+from nonholonomic.definition import MechanicalSystem
+
+VectorKernel = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def vectorize(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> VectorKernel:
+    """Compile ``exprs`` into ``f(X, p) -> (n, len(exprs))`` with ``X`` of shape ``(n, len(state))``.
+
+    ``args`` are the state symbols followed by the parameter symbols.
+    """
+    fn = sp.lambdify(list(args), list(exprs), modules="numpy", cse=True)
+
+    def evaluate(X: np.ndarray, p: np.ndarray) -> np.ndarray:
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        n = X.shape[0]
+        out = fn(*X.T, *np.asarray(p, dtype=float))
+        return np.stack([np.broadcast_to(np.asarray(o, dtype=float), (n,)) for o in out], axis=1)
+
+    return evaluate
+
+
+@dataclass(frozen=True)
+class NumericSystem:
+    """The numpy kernels of one system."""
+
+    system: MechanicalSystem
+    rhs: VectorKernel
+    integrals: VectorKernel
+    integral_scales: VectorKernel
+    derived: dict[str, VectorKernel]
+    density: VectorKernel
+    divergence_terms: VectorKernel
+    """Columns ``∂(ρ f_i)/∂x_i``: their sum is ``div(ρ f)``, their absolute sum its natural scale."""
+    constraints: VectorKernel
+
+    def rhs_single(self, y: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """``f(y)`` for one phase point (shape ``(dim,)``)."""
+        return self.rhs(y[None, :], p)[0]
+
+
+def divergence_terms(system: MechanicalSystem, density: sp.Expr) -> list[sp.Expr]:
+    """``[∂(ρ f_i)/∂x_i for each state coordinate]``, by symbolic differentiation."""
+    return [sp.diff(density * f, x) for f, x in zip(system.rhs, system.state_symbols)]
+
+
+@lru_cache(maxsize=64)
+def numeric(system: MechanicalSystem) -> NumericSystem:
+    """Compile the numpy kernels of ``system`` (once per process)."""
+    args = system.state_symbols + system.parameter_symbols
+    return NumericSystem(
+        system=system,
+        rhs=vectorize(system.rhs, args),
+        integrals=vectorize([i.expression for i in system.integrals] or [sp.Integer(0)], args),
+        integral_scales=vectorize([i.scale for i in system.integrals] or [sp.Integer(1)], args),
+        derived={d.name: vectorize(d.expression, args) for d in system.derived},
+        density=vectorize([system.measure.density], args),
+        divergence_terms=vectorize(divergence_terms(system, system.measure.density), args),
+        constraints=vectorize([c.expression for c in system.constraints] or [sp.Integer(0)], args),
+    )
+
+
+def parameter_vector(system: MechanicalSystem, values: dict[str, float | Sequence[float]]) -> np.ndarray:
+    """Flatten named parameter groups (``{"inertia": [..], "D": ..}``) in the system's order.
+
+    Raises
+    ------
+    KeyError
+        If a group is missing.
+    ValueError
+        If a group has the wrong number of components.
+    """
+    out: list[float] = []
+    for par in system.parameters:
+        if par.name not in values:
+            raise KeyError(par.name)
+        v = np.atleast_1d(np.asarray(values[par.name], dtype=float))
+        if v.shape != (len(par.symbols),):
+            raise ValueError(f"parameter {par.name!r} needs {len(par.symbols)} component(s), got {v.size}")
+        out.extend(v.tolist())
+    return np.asarray(out, dtype=float)
+
+
+def state_vector(system: MechanicalSystem, values: dict[str, Sequence[float]], p: np.ndarray) -> np.ndarray:
+    """Flatten named state vectors, converting alternative inputs (e.g. ``omega`` → ``M``).
+
+    Raises
+    ------
+    KeyError
+        If a state vector is given neither directly nor through an alternative.
+    """
+    names = {v.name for v in system.state}
+    direct = {k: np.asarray(v, dtype=float) for k, v in values.items() if k in names}
+    for alt in system.alternative_inputs:
+        if alt.name in values and alt.replaces not in direct:
+            # Every other state vector must be known to evaluate the conversion.
+            known = {s: float(x) for vec in system.state if vec.name in direct
+                     for s, x in zip(vec.symbols, direct[vec.name])}
+            known.update({s: float(x) for s, x in zip(alt.symbols, values[alt.name])})
+            known.update({s: float(x) for s, x in zip(system.parameter_symbols, p)})
+            direct[alt.replaces] = np.array([float(e.subs(known)) for e in alt.expression])
+    missing = [v.name for v in system.state if v.name not in direct]
+    if missing:
+        raise KeyError(", ".join(missing))
+    return np.concatenate([direct[v.name] for v in system.state])
