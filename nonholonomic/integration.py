@@ -27,6 +27,9 @@ MACHINE_EPSILON = float(np.finfo(float).eps)
 SCIPY_MIN_TOLERANCE = 1e-13
 ENGINES = ("heyoka", "scipy")
 
+#: At most this many accepted steps are kept for the integral checks (then every other one is dropped).
+MAX_RECORDED_STEPS = 400_000
+
 #: ``progress(fraction_done) -> keep_going``; return False to cancel.
 ProgressCallback = Callable[[float], bool]
 
@@ -41,7 +44,10 @@ class IntegrationCancelled(RuntimeError):
 
 @dataclass(frozen=True)
 class Trajectory:
-    """Samples at the requested times and the states at every accepted step.
+    """Samples at the requested times and the states at the accepted steps.
+
+    ``step_states`` holds every accepted step unless there were more than ``MAX_RECORDED_STEPS``;
+    then it is thinned evenly (see :class:`StepRecorder`).
 
     ``states`` and ``step_states`` have shape ``(n, dim)`` in the order of ``system.state_symbols``.
     """
@@ -56,6 +62,26 @@ class Trajectory:
     steps: int
     wall_time_s: float
     versions: dict[str, str]
+
+
+class StepRecorder:
+    """The states at accepted steps, thinned by half whenever ``capacity`` is reached (bounded memory).
+
+    ``stride`` is how many accepted steps one kept row stands for (1 until the first thinning).
+    """
+
+    def __init__(self, capacity: int = MAX_RECORDED_STEPS) -> None:
+        self.capacity, self.stride, self._count = capacity, 1, 0
+        self.t: list[float] = []
+        self.states: list[np.ndarray] = []
+
+    def add(self, t: float, state: np.ndarray) -> None:
+        if self._count % self.stride == 0:
+            self.t.append(t)
+            self.states.append(state.copy())
+            if len(self.t) >= self.capacity:
+                self.t, self.states, self.stride = self.t[::2], self.states[::2], self.stride * 2
+        self._count += 1
 
 
 @lru_cache(maxsize=32)
@@ -134,12 +160,11 @@ def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, g
     ta.state[:] = np.append(y0, 0.0)
     ta.pars[:] = p
     t_final = grid[-1]
-    step_t: list[float] = [0.0]
-    step_states: list[np.ndarray] = [ta.state[:-1].copy()]
+    recorder = StepRecorder()
+    recorder.add(0.0, ta.state[:-1])
 
     def on_step(integrator: hy.taylor_adaptive) -> bool:
-        step_t.append(integrator.time)
-        step_states.append(integrator.state[:-1].copy())
+        recorder.add(integrator.time, integrator.state[:-1])
         return True if progress is None else bool(progress(min(integrator.time / t_final, 1.0)))
 
     outcome, _, _, nsteps, _, out = ta.propagate_grid(grid, callback=on_step)
@@ -149,7 +174,7 @@ def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, g
         raise IntegrationError(f"heyoka stopped at t = {ta.time:g} with outcome {outcome.name}")
     return Trajectory(
         t=grid, tau=out[:, -1].copy(), states=out[:, :-1].copy(),
-        step_t=np.asarray(step_t), step_states=np.asarray(step_states),
+        step_t=np.asarray(recorder.t), step_states=np.asarray(recorder.states),
         engine="heyoka", tolerance=tol, steps=int(nsteps),
         wall_time_s=time.perf_counter() - start, versions=_versions(),
     )

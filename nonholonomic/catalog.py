@@ -1,0 +1,61 @@
+"""The catalog of systems (``GET /v1/systems``), read off the symbolic definitions."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from nonholonomic.definition import Parameter
+from nonholonomic.potentials import POTENTIALS
+from nonholonomic.simulation import CHECKS
+from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
+
+
+def _parameter(par: Parameter) -> dict[str, Any]:
+    return {"name": par.name, "components": [str(s) for s in par.symbols], "meaning": par.meaning,
+            "unit": par.unit, "admissible": par.admissible}
+
+
+def describe(kind: str) -> dict[str, Any]:
+    """Everything a client needs to pose a job for ``kind``.
+
+    Raises
+    ------
+    KeyError
+        If the kind is unknown.
+    """
+    module = SYSTEMS[kind]
+    potentials = SUPPORTED_POTENTIALS[kind]
+    definitions = {p: get_system(kind, p) for p in potentials}
+    base = definitions[potentials[0]]
+    integrals: dict[str, dict[str, Any]] = {}
+    for potential, system in definitions.items():
+        for claim in system.integrals:
+            entry = integrals.setdefault(claim.name, {"name": claim.name, "formula": claim.formula,
+                                                      "equation": claim.equation, "claimed_for_potentials": []})
+            entry["claimed_for_potentials"].append(potential)
+    return {
+        "kind": kind,
+        "title": module.TITLE,
+        "equation": base.equation,
+        "parameters": [_parameter(p) for p in module.PARAMETERS],
+        "potentials": [{"kind": p, "formula": POTENTIALS[p].formula,
+                        "parameters": [_parameter(q) for q in POTENTIALS[p].parameters]} for p in potentials],
+        "state": [{"name": v.name, "components": [str(s) for s in v.symbols], "meaning": v.meaning, "unit": v.unit}
+                  for v in base.state],
+        "alternative_inputs": [{"name": a.name, "replaces": a.replaces, "formula": a.formula}
+                               for a in base.alternative_inputs],
+        "derived": [{"name": d.name, "formula": d.formula, "meaning": d.meaning, "unit": d.unit} for d in base.derived],
+        "constraints": [{"field": c.field, "formula": c.formula, "equation": c.equation, "tolerance": c.tolerance}
+                        for c in base.constraints],
+        "integrals": list(integrals.values()),
+        "measure": {"formula": base.measure.formula, "equation": base.measure.equation},
+        "reduced_time": {"formula": base.reduced_time.formula, "equation": base.reduced_time.equation,
+                         "unit": base.reduced_time.unit},
+        "checks": list(CHECKS),
+        "time_unit": "s",
+    }
+
+
+def catalog() -> dict[str, Any]:
+    """The whole catalog: one entry per system kind."""
+    return {"systems": [describe(kind) for kind in SYSTEMS]}

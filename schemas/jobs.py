@@ -1,0 +1,105 @@
+"""Job requests and job views (``POST /v1/jobs``, ``GET /v1/jobs/{id}``)."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from nonholonomic.integration import SCIPY_MIN_TOLERANCE
+from nonholonomic.simulation import CHECKS, FieldProblem, initial_state_problems
+from schemas.settings import get_settings
+from schemas.results import SimulationResultModel
+from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
+
+JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+TERMINAL_STATUSES: frozenset[str] = frozenset({"succeeded", "failed", "cancelled"})
+
+
+class IntegratorOptions(BaseModel):
+    """Which engine integrates, at which tolerance."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    engine: Literal["heyoka", "scipy"] = Field(
+        "heyoka", description="heyoka: adaptive Taylor method (default); scipy: DOP853, an independent cross-check")
+    tolerance: FiniteFloat | None = Field(
+        None, gt=0, le=1e-3,
+        description="heyoka: relative/absolute tolerance (default machine epsilon 2.2e-16); "
+                    f"scipy: rtol = atol (default 1e-12, at least {SCIPY_MIN_TOLERANCE:g})")
+
+
+class JobRequest(BaseModel):
+    """A simulation job: a system, an initial state, the sample grid and the evidence wanted."""
+
+    model_config = ConfigDict(
+        extra="forbid",
+        json_schema_extra={"examples": [{
+            "system": {"kind": "chaplygin_ball", "inertia": [1.0, 2.0, 3.5], "D": 0.7,
+                       "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}},
+            "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]},
+            "t_final": 20.0, "samples": 201, "checks": ["integrals", "measure"]}]},
+    )
+
+    system: AnySystemSpec
+    initial_state: dict[str, Vec3] = Field(
+        description="state vectors by name (the catalog lists them), e.g. {'M': [..], 'gamma': [..]}; "
+                    "for the ball 'omega' may replace 'M'")
+    t_final: FiniteFloat = Field(gt=0, description="end of the integration interval [0, t_final], in s")
+    samples: int = Field(201, ge=2, description="number of equally spaced sample times, both ends included")
+    checks: list[Literal["integrals", "measure"]] = Field(
+        default_factory=lambda: list(CHECKS), description="evidence to compute")
+    integrator: IntegratorOptions = Field(default_factory=IntegratorOptions)
+
+    @field_validator("t_final")
+    @classmethod
+    def _t_final_limit(cls, v: float) -> float:
+        limit = get_settings().max_t_final
+        if v > limit:
+            raise ValueError(f"t_final = {v:g} exceeds this service's maximum {limit:g}")
+        return v
+
+    @field_validator("samples")
+    @classmethod
+    def _samples_limit(cls, v: int) -> int:
+        limit = get_settings().max_samples
+        if v > limit:
+            raise ValueError(f"samples = {v} exceeds this service's maximum {limit}")
+        return v
+
+    def problems(self) -> list[FieldProblem]:
+        """Violations only the physics can see: state names, |γ| = 1, the engine's tolerance range."""
+        found = initial_state_problems(self.system.definition(), self.system.parameter_values(),  # type: ignore[attr-defined]
+                                       self.initial_state)
+        tol = self.integrator.tolerance
+        if self.integrator.engine == "scipy" and tol is not None and tol < SCIPY_MIN_TOLERANCE:
+            found.append(FieldProblem("integrator.tolerance",
+                                      f"scipy DOP853 cannot honour {tol:g}; use >= {SCIPY_MIN_TOLERANCE:g} or heyoka"))
+        return found
+
+
+class JobAccepted(BaseModel):
+    """Answer to ``POST /v1/jobs`` (202)."""
+
+    id: str
+    status: JobStatus
+    location: str
+
+
+class JobError(BaseModel):
+    """Why a job failed."""
+
+    type: str
+    message: str
+
+
+class JobView(BaseModel):
+    """A job as ``GET /v1/jobs/{id}`` shows it; ``result`` is set once it succeeded."""
+
+    id: str
+    status: JobStatus
+    progress: float = Field(ge=0, le=1)
+    created_at: str
+    request: dict[str, Any]
+    result: SimulationResultModel | None = None
+    error: JobError | None = None

@@ -1,0 +1,112 @@
+"""The result of a simulation job, as JSON: trajectory, integrals, checks, integration facts."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from nonholonomic.simulation import SimulationResult
+
+
+class IntegralItem(BaseModel):
+    """A first integral along the trajectory (samples and accepted steps)."""
+
+    name: str
+    formula: str
+    equation: str = Field(description="paper equation label")
+    initial: float
+    final: float
+    max_abs_drift: float
+    max_rel_drift: float = Field(description="max_abs_drift / reference")
+    reference: float = Field(description="max(|initial|, natural scale of the integral at t = 0)")
+    evaluated_at: int = Field(description="number of states evaluated (samples + accepted steps)")
+    tolerance: float = Field(description="bound on max_rel_drift for the verdict")
+    passed: bool
+
+
+class CheckItem(BaseModel):
+    """A machine check (e.g. the invariant measure), with method, residual, tolerance and verdict."""
+
+    name: str
+    quantity: str
+    formula: str
+    equation: str
+    method: str = Field(description="symbolic | pointwise")
+    residual: float | None
+    tolerance: float | None
+    passed: bool | None = Field(description="null when the check could not decide")
+    detail: str
+
+
+class IntegrationInfo(BaseModel):
+    engine: str
+    tolerance: float
+    steps: int
+    wall_time_s: float = Field(description="integration only (compilation is once per worker process)")
+    versions: dict[str, str]
+
+
+class TimeInfo(BaseModel):
+    t: str = "physical time t [s]"
+    tau: str = Field(description="reduced time of the Hamiltonization, with its formula and equation")
+
+
+class SystemInfo(BaseModel):
+    kind: str
+    title: str
+    equation: str
+    potential: str
+    potential_formula: str
+    parameters: dict[str, Any]
+    units: dict[str, str]
+
+
+class Trajectory(BaseModel):
+    """Samples: ``t``, ``tau`` and one list of 3-vectors per state or derived vector."""
+
+    model_config = ConfigDict(extra="allow")
+    t: list[float]
+    tau: list[float]
+
+
+class SimulationResultModel(BaseModel):
+    system: SystemInfo
+    final_state: dict[str, list[float]]
+    t_final: float
+    tau_final: float
+    time: TimeInfo
+    trajectory: Trajectory
+    integrals: list[IntegralItem]
+    checks: list[CheckItem]
+    integration: IntegrationInfo
+    warnings: list[str]
+
+
+def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict[str, Any]:
+    """The JSON form of a core :class:`~nonholonomic.simulation.SimulationResult`."""
+    system = result.system
+    traj = result.trajectory
+    vectors = [v.name for v in system.state] + [d.name for d in system.derived]
+    units = {"t": "s", "tau": system.reduced_time.unit}
+    units.update({v.name: v.unit for v in system.state})
+    units.update({d.name: d.unit for d in system.derived})
+    units.update({p.name: p.unit for p in system.parameters})
+    samples = {name: result.state(name).tolist() for name in vectors}
+    return {
+        "system": {"kind": system.kind, "title": system.title, "equation": system.equation,
+                   "potential": system.potential, "potential_formula": system.potential_formula,
+                   "parameters": parameters, "units": units},
+        "final_state": {name: values[-1] for name, values in samples.items()},
+        "t_final": float(traj.t[-1]),
+        "tau_final": float(traj.tau[-1]),
+        "time": {"t": "physical time t [s]",
+                 "tau": f"reduced time, {system.reduced_time.formula} (eq. {system.reduced_time.equation}), tau(0) = 0"},
+        "trajectory": {"t": traj.t.tolist(), "tau": traj.tau.tolist(), **samples},
+        "integrals": [asdict(i) for i in result.integrals],
+        "checks": [asdict(c) for c in result.checks],
+        "integration": {"engine": traj.engine, "tolerance": traj.tolerance, "steps": traj.steps,
+                        "wall_time_s": traj.wall_time_s, "versions": traj.versions},
+        "warnings": list(result.warnings),
+    }

@@ -1,0 +1,38 @@
+"""Deployment settings, read from the environment (shared by the API and the workers)."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+from pydantic import AliasChoices, Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Settings; every field can be set as ``NONHOLONOMIC_<NAME>`` (``REDIS_URL`` also plain).
+
+    Without a Redis URL the API runs in embedded mode: jobs run in-process, nothing is queued.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="NONHOLONOMIC_", extra="ignore")
+
+    redis_url: str | None = Field(None, validation_alias=AliasChoices("REDIS_URL", "NONHOLONOMIC_REDIS_URL"))
+    queue: str = Field("nonholonomic", description="Celery queue the API sends jobs to and workers consume")
+    max_t_final: float = Field(1e5, gt=0, description="largest accepted t_final")
+    max_samples: int = Field(100_001, ge=2, description="largest accepted number of samples")
+    job_soft_time_limit_s: float = Field(600.0, gt=0)
+    job_time_limit_s: float = Field(660.0, gt=0)
+    visibility_timeout_s: float = Field(3600.0, gt=0, description="broker redelivery timeout (> time limits)")
+    job_ttl_s: int = Field(7 * 24 * 3600, gt=0, description="how long job records and results are kept")
+    embedded_workers: int = Field(1, ge=1, description="threads running jobs in embedded mode")
+    warm_up: bool = Field(True, description="compile the integrators when a worker (or embedded API) starts")
+
+    @property
+    def embedded(self) -> bool:
+        return not self.redis_url
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    """The process's settings (cached; ``get_settings.cache_clear()`` rereads the environment)."""
+    return Settings()

@@ -1,0 +1,88 @@
+"""Request models for systems and potentials, generated from the core's definitions.
+
+Each kind's parameters (names, meaning, units, admissible ranges) are declared once, in its core
+module (``PARAMETERS``) and in :mod:`nonholonomic.potentials`; the pydantic models here are built
+from those declarations so the API cannot disagree with the core.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, create_model
+
+from nonholonomic.definition import MechanicalSystem, Parameter
+from nonholonomic.potentials import POTENTIALS
+from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+
+
+def _camel(name: str) -> str:
+    return "".join(part.capitalize() for part in name.split("_"))
+
+
+def _parameter_field(par: Parameter) -> tuple[Any, Any]:
+    bounds: dict[str, float] = {}
+    if par.minimum is not None:
+        bounds["gt" if par.strict else "ge"] = par.minimum
+    number = Annotated[float, Field(allow_inf_nan=False, **bounds)]
+    annotation = tuple[number, number, number] if par.is_vector else number
+    return annotation, Field(description=f"{par.meaning} [{par.unit}]; {par.admissible}")
+
+
+class PotentialSpec(BaseModel):
+    """Base of the potential models: ``kind`` plus the potential's own parameters."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    def parameter_values(self) -> dict[str, Any]:
+        return self.model_dump(exclude={"kind"})
+
+
+class SystemSpec(BaseModel):
+    """Base of the system models: ``kind``, the system's parameters and ``potential``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    def parameter_values(self) -> dict[str, Any]:
+        """Every parameter group by name, the potential's included (the core's input)."""
+        values = self.model_dump(exclude={"kind", "potential"})
+        values.update(self.potential.parameter_values())  # type: ignore[attr-defined]
+        return values
+
+    def definition(self) -> MechanicalSystem:
+        """The core's symbolic definition for this kind and potential."""
+        return get_system(self.kind, self.potential.kind)  # type: ignore[attr-defined]
+
+
+POTENTIAL_MODELS: dict[str, type[PotentialSpec]] = {
+    pot.kind: create_model(  # type: ignore[call-overload]
+        f"{_camel(pot.kind)}Potential",
+        __base__=PotentialSpec,
+        __doc__=pot.formula,
+        kind=(Literal[pot.kind], ...),
+        **{par.name: _parameter_field(par) for par in pot.parameters},
+    )
+    for pot in POTENTIALS.values()
+}
+
+
+def _system_model(kind: str) -> type[SystemSpec]:
+    module = SYSTEMS[kind]
+    allowed = [POTENTIAL_MODELS[p] for p in SUPPORTED_POTENTIALS[kind]]
+    potential_union = Annotated[Union[tuple(allowed)], Field(discriminator="kind")]  # type: ignore[valid-type]
+    return create_model(  # type: ignore[call-overload]
+        f"{_camel(kind)}Spec",
+        __base__=SystemSpec,
+        __doc__=module.TITLE,
+        kind=(Literal[kind], ...),
+        **{par.name: _parameter_field(par) for par in module.PARAMETERS},
+        potential=(potential_union, Field(default_factory=lambda: POTENTIAL_MODELS["zero"](kind="zero"),
+                                          description=f"one of: {', '.join(SUPPORTED_POTENTIALS[kind])}")),
+    )
+
+
+SYSTEM_MODELS: dict[str, type[SystemSpec]] = {kind: _system_model(kind) for kind in SYSTEMS}
+AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discriminator="kind")]  # type: ignore[valid-type]

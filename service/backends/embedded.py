@@ -1,0 +1,86 @@
+"""Embedded mode: jobs run in this process, in a thread pool, through the same job function as the
+Celery task (:func:`workers.jobs.run_job`). For a first run on a bare machine: no Redis, no worker."""
+
+from __future__ import annotations
+
+import threading
+import uuid
+from concurrent.futures import ThreadPoolExecutor
+from datetime import datetime, timezone
+from typing import Any
+
+from nonholonomic.integration import IntegrationCancelled
+from schemas.jobs import TERMINAL_STATUSES
+from schemas.settings import Settings
+from service.backends.base import JobRecord
+from workers.jobs import run_job, warm_up
+
+
+class EmbeddedBackend:
+    """Jobs in memory, run by ``settings.embedded_workers`` threads."""
+
+    mode = "embedded"
+
+    def __init__(self, settings: Settings) -> None:
+        self._jobs: dict[str, JobRecord] = {}
+        self._cancel: dict[str, threading.Event] = {}
+        self._lock = threading.Lock()
+        self._pool = ThreadPoolExecutor(settings.embedded_workers, thread_name_prefix="nonholonomic-job")
+        self._warm = self._pool.submit(warm_up) if settings.warm_up else None
+
+    def submit(self, request: dict[str, Any]) -> JobRecord:
+        job_id = str(uuid.uuid4())
+        record = JobRecord(job_id, "queued", 0.0, datetime.now(timezone.utc).isoformat(), request)
+        with self._lock:
+            self._jobs[job_id] = record
+            self._cancel[job_id] = threading.Event()
+        self._pool.submit(self._run, job_id)
+        return record
+
+    def _run(self, job_id: str) -> None:
+        record, cancelled = self._jobs[job_id], self._cancel[job_id]
+        with self._lock:
+            if cancelled.is_set():
+                return
+            record.status = "running"
+
+        def progress(fraction: float) -> bool:
+            record.progress = fraction
+            return not cancelled.is_set()
+
+        try:
+            result = run_job(record.request, progress)
+        except IntegrationCancelled:
+            return
+        except Exception as exc:  # reported to the client as the job's error
+            with self._lock:
+                if not cancelled.is_set():
+                    record.error = {"type": type(exc).__name__, "message": str(exc)}
+                    record.status = "failed"
+        else:
+            with self._lock:
+                if not cancelled.is_set():
+                    record.result, record.progress, record.status = result, 1.0, "succeeded"
+
+    def get(self, job_id: str) -> JobRecord | None:
+        return self._jobs.get(job_id)
+
+    def cancel(self, job_id: str) -> JobRecord | None:
+        record = self._jobs.get(job_id)
+        if record is None:
+            return None
+        with self._lock:
+            if record.status not in TERMINAL_STATUSES:
+                self._cancel[job_id].set()
+                record.status = "cancelled"
+        return record
+
+    def health(self) -> dict[str, Any]:
+        warm = self._warm is None or self._warm.done()
+        return {"ok": True, "mode": self.mode, "broker": "none (embedded)",
+                "workers": {"threads": self._pool._max_workers, "warm": warm}}
+
+    def close(self) -> None:
+        for event in self._cancel.values():
+            event.set()
+        self._pool.shutdown(wait=False, cancel_futures=True)

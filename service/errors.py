@@ -1,0 +1,87 @@
+"""RFC 9457 problem+json for every error: validation (422), unknown job (404), conflicts (409) ..."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from schemas.problems import INTERNAL, INVALID_REQUEST, PROBLEM_MEDIA_TYPE, FieldError, Problem
+
+log = logging.getLogger(__name__)
+
+
+class ProblemError(Exception):
+    """Raise to answer with a problem (any status)."""
+
+    def __init__(self, status: int, title: str, detail: str, type_: str = "about:blank",
+                 errors: Sequence[FieldError] = ()) -> None:
+        super().__init__(detail)
+        self.problem = Problem(type=type_, title=title, status=status, detail=detail, errors=list(errors))
+
+
+def invalid_request(errors: Sequence[FieldError]) -> ProblemError:
+    """A 422 naming every offending field."""
+    detail = "; ".join(f"{e.field}: {e.reason}" for e in errors)
+    return ProblemError(422, "Invalid request", detail, INVALID_REQUEST, errors)
+
+
+def field_path(loc: Sequence[Any], body: Any) -> str:
+    """Dotted path of a pydantic error location in the request body.
+
+    pydantic puts the tag of a discriminated union in the location (``system.chaplygin_ball.D``);
+    walking the actual input drops such segments, giving ``system.D``.
+    """
+    parts: list[str] = []
+    node = body
+    for item in loc[1:] if loc and loc[0] == "body" else loc:
+        if isinstance(item, int):
+            parts.append(f"[{item}]")
+            node = node[item] if isinstance(node, list) and -len(node) <= item < len(node) else None
+            continue
+        if isinstance(node, dict) and item not in node and node.get("kind") == item:
+            continue  # a union tag, not a key
+        parts.append(f".{item}" if parts else str(item))
+        node = node.get(item) if isinstance(node, dict) else None
+    return "".join(parts) or "body"
+
+
+def _respond(problem: Problem, request: Request) -> JSONResponse:
+    problem.instance = problem.instance or request.url.path
+    return JSONResponse(problem.model_dump(exclude_none=True), status_code=problem.status,
+                        media_type=PROBLEM_MEDIA_TYPE)
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Answer every error as ``application/problem+json``."""
+
+    @app.exception_handler(ProblemError)
+    async def _problem(request: Request, exc: ProblemError) -> JSONResponse:
+        return _respond(exc.problem.model_copy(), request)
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
+        body = exc.body
+        errors = []
+        for err in exc.errors():
+            reason = err["msg"]
+            if err["type"] == "json_invalid":
+                reason = f"body is not valid JSON: {err.get('ctx', {}).get('error', reason)}"
+            errors.append(FieldError(field=field_path(err["loc"], body), reason=reason))
+        return _respond(invalid_request(errors).problem, request)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        title = {404: "Not Found", 405: "Method Not Allowed"}.get(exc.status_code, "HTTP error")
+        return _respond(Problem(title=title, status=exc.status_code, detail=str(exc.detail)), request)
+
+    @app.exception_handler(Exception)
+    async def _internal(request: Request, exc: Exception) -> JSONResponse:
+        log.exception("unhandled error on %s", request.url.path)
+        return _respond(Problem(type=INTERNAL, title="Internal error", status=500,
+                                detail=f"{type(exc).__name__}: the server failed; this is a bug"), request)

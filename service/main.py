@@ -1,0 +1,45 @@
+"""The ASGI app: ``service.main:app``.
+
+Embedded mode (jobs in-process) unless ``REDIS_URL`` is set, then jobs go to Celery workers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+
+import nonholonomic
+from schemas.settings import Settings, get_settings
+from service.backends import make_backend
+from service.errors import install_error_handlers
+from service.routes import health, jobs, systems
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the app; the job backend is created at startup from ``settings``."""
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        app.state.backend = make_backend(settings or get_settings())
+        try:
+            yield
+        finally:
+            app.state.backend.close()
+
+    app = FastAPI(
+        title="nonholonomic",
+        version=nonholonomic.__version__,
+        summary="Nonholonomic mechanics with machine-checked evidence (Borisov & Mamaev, "
+                "'Hamiltonization of nonholonomic systems').",
+        lifespan=lifespan,
+    )
+    install_error_handlers(app)
+    app.include_router(health.router)
+    app.include_router(systems.router)
+    app.include_router(jobs.router)
+    return app
+
+
+app = create_app()

@@ -1,0 +1,58 @@
+"""The job function: validate a request, simulate, return JSON. Celery's task and embedded mode
+both call :func:`run_job`, so a job computes the same thing however it is run."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from nonholonomic.integration import ProgressCallback
+from nonholonomic.simulation import simulate
+from schemas.jobs import JobRequest
+from schemas.results import result_to_json
+
+
+class InvalidJob(ValueError):
+    """The request fails validation (normally caught by the API before anything is queued)."""
+
+
+def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -> dict[str, Any]:
+    """Run one simulation job.
+
+    Parameters
+    ----------
+    request : a ``JobRequest`` as JSON.
+    progress : ``progress(fraction) -> keep_going``; returning False cancels the job
+        (:class:`nonholonomic.integration.IntegrationCancelled` is raised).
+
+    Returns
+    -------
+    dict
+        The ``SimulationResultModel`` as JSON. The same request gives the same numbers
+        (only ``integration.wall_time_s`` differs).
+    """
+    job = JobRequest.model_validate(request)
+    problems = job.problems()
+    if problems:
+        raise InvalidJob("; ".join(f"{p.field}: {p.reason}" for p in problems))
+    system = job.system.definition()
+    parameters = job.system.parameter_values()
+    result = simulate(
+        system, parameters, job.initial_state, job.t_final, job.samples,
+        checks=job.checks, engine=job.integrator.engine, tolerance=job.integrator.tolerance, progress=progress,
+    )
+    return result_to_json(result, {k: list(v) if isinstance(v, tuple) else v for k, v in parameters.items()})
+
+
+def warm_up() -> None:
+    """Compile every system's kernels and integrator and run its symbolic proofs (once per process)."""
+    from nonholonomic.evidence.measure import symbolic_divergence_vanishes
+    from nonholonomic.integration import MACHINE_EPSILON, heyoka_template
+    from nonholonomic.kernels import numeric
+    from nonholonomic.systems import SUPPORTED_POTENTIALS, get_system
+
+    for kind, potentials in SUPPORTED_POTENTIALS.items():
+        for potential in potentials:
+            system = get_system(kind, potential)
+            heyoka_template(system, MACHINE_EPSILON)
+            numeric(system)
+            symbolic_divergence_vanishes(system)

@@ -1,0 +1,63 @@
+"""Celery tasks: thin wrappers of :func:`workers.jobs.run_job`."""
+
+from __future__ import annotations
+
+import time
+from functools import lru_cache
+from typing import Any
+
+import redis
+from celery import Task, states
+from celery.exceptions import Ignore, SoftTimeLimitExceeded
+
+from nonholonomic.integration import IntegrationCancelled
+from schemas.settings import get_settings
+from workers.celery_app import DEFAULT_REDIS_URL, app
+from workers.jobs import run_job
+from workers.registry import RedisJobRegistry
+
+#: Seconds between progress updates (and cancellation checks) of a running job.
+PROGRESS_INTERVAL_S = 0.2
+
+
+class JobTimeout(RuntimeError):
+    """The job ran past its soft time limit."""
+
+
+@lru_cache(maxsize=1)
+def _registry() -> RedisJobRegistry:
+    settings = get_settings()
+    return RedisJobRegistry(redis.Redis.from_url(settings.redis_url or DEFAULT_REDIS_URL), settings.job_ttl_s)
+
+
+class _Progress:
+    """Reports progress through ``update_state`` and stops the job when it was cancelled."""
+
+    def __init__(self, task: Task, job_id: str) -> None:
+        self.task, self.job_id, self.last = task, job_id, time.monotonic()
+
+    def __call__(self, fraction: float) -> bool:
+        now = time.monotonic()
+        if now - self.last < PROGRESS_INTERVAL_S:
+            return True
+        self.last = now
+        if _registry().is_cancelled(self.job_id):
+            return False
+        self.task.update_state(state="PROGRESS", meta={"progress": fraction})
+        return True
+
+
+@app.task(bind=True, name="nonholonomic.simulate")
+def simulate_job(self: Task, request: dict[str, Any]) -> dict[str, Any]:
+    """Run a simulation job (the request is a ``JobRequest`` as JSON); returns the result JSON."""
+    job_id = self.request.id
+    if _registry().is_cancelled(job_id):
+        self.update_state(state=states.REVOKED)
+        raise Ignore()
+    try:
+        return run_job(request, _Progress(self, job_id))
+    except IntegrationCancelled:
+        self.update_state(state=states.REVOKED)
+        raise Ignore() from None
+    except SoftTimeLimitExceeded:
+        raise JobTimeout(f"the job exceeded its time limit of {get_settings().job_soft_time_limit_s:g} s") from None
