@@ -16,7 +16,7 @@ from nonholonomic.potentials import POTENTIALS
 from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
-Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+Vec3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
 
 
 def _camel(name: str) -> str:
@@ -28,7 +28,7 @@ def _parameter_field(par: Parameter) -> tuple[Any, Any]:
     if par.minimum is not None:
         bounds["gt" if par.strict else "ge"] = par.minimum
     number = Annotated[float, Field(allow_inf_nan=False, **bounds)]
-    annotation = tuple[number, number, number] if par.is_vector else number
+    annotation = Annotated[list[number], Field(min_length=3, max_length=3)] if par.is_vector else number
     return annotation, Field(description=f"{par.meaning} [{par.unit}]; {par.admissible}")
 
 

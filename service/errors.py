@@ -69,10 +69,15 @@ def install_error_handlers(app: FastAPI) -> None:
         body = exc.body
         errors = []
         for err in exc.errors():
-            reason = err["msg"]
-            if err["type"] == "json_invalid":
-                reason = f"body is not valid JSON: {err.get('ctx', {}).get('error', reason)}"
-            errors.append(FieldError(field=field_path(err["loc"], body), reason=reason))
+            if err["type"] == "json_invalid":  # loc is ("body", character position)
+                position = err["loc"][-1]
+                errors.append(FieldError(field="body", reason=f"body is not valid JSON at character {position}: "
+                                                               f"{err.get('ctx', {}).get('error', err['msg'])}"))
+                continue
+            path = field_path(err["loc"], body)
+            if err["type"] in ("union_tag_invalid", "union_tag_not_found"):
+                path += ".kind"  # the discriminator itself is the offending field
+            errors.append(FieldError(field=path, reason=err["msg"]))
         return _respond(invalid_request(errors).problem, request)
 
     @app.exception_handler(StarletteHTTPException)

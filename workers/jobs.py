@@ -40,7 +40,7 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
         system, parameters, job.initial_state, job.t_final, job.samples,
         checks=job.checks, engine=job.integrator.engine, tolerance=job.integrator.tolerance, progress=progress,
     )
-    return result_to_json(result, {k: list(v) if isinstance(v, tuple) else v for k, v in parameters.items()})
+    return result_to_json(result, parameters)
 
 
 def warm_up() -> None:

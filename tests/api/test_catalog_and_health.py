@@ -1,0 +1,38 @@
+"""The catalog, the health endpoint and the OpenAPI docs."""
+
+from __future__ import annotations
+
+
+def test_health_in_embedded_mode(client):
+    r = client.get("/health")
+    assert r.status_code == 200
+    body = r.json()
+    assert body["status"] == "ok" and body["mode"] == "embedded" and body["api"] == "ok"
+
+
+def test_catalog_describes_the_ball(client):
+    systems = client.get("/v1/systems").json()["systems"]
+    ball = next(s for s in systems if s["kind"] == "chaplygin_ball")
+    assert ball == client.get("/v1/systems/chaplygin_ball").json()
+    params = {p["name"]: p for p in ball["parameters"]}
+    assert params["inertia"]["admissible"] == "> 0" and params["D"]["admissible"] == ">= 0"
+    assert params["inertia"]["unit"] == "kg m^2"
+    assert [s["name"] for s in ball["state"]] == ["M", "gamma"]
+    assert {p["kind"] for p in ball["potentials"]} == {"zero", "linear", "brun"}
+    integrals = {i["name"]: i for i in ball["integrals"]}
+    assert integrals["F"]["claimed_for_potentials"] == ["zero"] and integrals["F"]["equation"] == "2604-4"
+    assert set(integrals["energy"]["claimed_for_potentials"]) == {"zero", "linear", "brun"}
+    assert ball["measure"]["equation"] == "2604-3" and ball["reduced_time"]["equation"] == "2604-5"
+    assert ball["checks"] == ["integrals", "measure"]
+    assert ball["alternative_inputs"][0]["name"] == "omega"
+
+
+def test_unknown_kind_in_catalog_is_404(client):
+    r = client.get("/v1/systems/suslov")
+    assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
+
+
+def test_openapi_docs_are_served(client):
+    assert client.get("/docs").status_code == 200
+    spec = client.get("/openapi.json").json()
+    assert {"/v1/jobs", "/v1/jobs/{job_id}", "/v1/systems", "/health"} <= set(spec["paths"])

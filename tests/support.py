@@ -1,0 +1,91 @@
+"""Starting real processes for tests and benchmarks: a Celery worker, the API under uvicorn."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Mapping
+from pathlib import Path
+
+import httpx
+import redis
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+TEST_REDIS_URL = os.environ.get("NONHOLONOMIC_TEST_REDIS_URL", "redis://127.0.0.1:6379/15")
+
+
+def redis_available(url: str = TEST_REDIS_URL) -> bool:
+    try:
+        return bool(redis.Redis.from_url(url, socket_timeout=1).ping())
+    except redis.RedisError:
+        return False
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _env(extra: Mapping[str, str]) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NONHOLONOMIC_") and k != "REDIS_URL"}
+    env.update(extra)
+    return env
+
+
+def start_worker(redis_url: str, queue: str, log: Path, concurrency: int = 1,
+                 extra_env: Mapping[str, str] | None = None) -> subprocess.Popen:
+    """A real Celery worker process (prefork pool) consuming ``queue``."""
+    env = _env({"REDIS_URL": redis_url, "NONHOLONOMIC_QUEUE": queue, **(extra_env or {})})
+    cmd = [str(BIN / "celery"), "-A", "workers.celery_app:app", "worker", "-Q", queue, "--pool", "prefork",
+           "--concurrency", str(concurrency), "--loglevel", "INFO", "--hostname", f"{queue}@%h", "--without-gossip",
+           "--without-mingle"]
+    return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+def start_api(port: int, log: Path, env: Mapping[str, str]) -> subprocess.Popen:
+    """The API under uvicorn on 127.0.0.1:``port``; ``env`` decides the mode (``REDIS_URL`` or not)."""
+    cmd = [str(BIN / "uvicorn"), "service.main:app", "--host", "127.0.0.1", "--port", str(port)]
+    return subprocess.Popen(cmd, cwd=ROOT, env=_env(env), stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+def wait_until(predicate, timeout: float, what: str, interval: float = 0.1) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if predicate():
+                return
+        except (httpx.HTTPError, redis.RedisError):
+            pass
+        time.sleep(interval)
+    raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
+
+
+def wait_healthy(base: str, timeout: float = 120.0) -> None:
+    """Wait until ``GET /health`` answers 200 (API up; in queue mode a worker serves the queue)."""
+    wait_until(lambda: httpx.get(f"{base}/health", timeout=5).status_code == 200, timeout, f"{base}/health")
+
+
+def stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(5)
+
+
+def poll_job(client: httpx.Client, location: str, timeout: float = 60.0, interval: float = 0.002) -> dict:
+    """Poll a job until it is terminal; returns its last view."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        view = client.get(location).json()
+        if view["status"] in ("succeeded", "failed", "cancelled"):
+            return view
+        time.sleep(interval)
+    raise TimeoutError(f"job {location} not finished after {timeout:g} s")
