@@ -1,0 +1,13 @@
+# One image for the API and the worker (docker-compose.yml chooses the command).
+FROM python:3.11-slim
+ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1
+WORKDIR /app
+COPY pyproject.toml README.md ./
+COPY nonholonomic ./nonholonomic
+COPY schemas ./schemas
+COPY service ./service
+COPY workers ./workers
+RUN pip install --no-cache-dir . && useradd --create-home app
+USER app
+EXPOSE 8000
+CMD ["uvicorn", "service.main:app", "--host", "0.0.0.0", "--port", "8000"]

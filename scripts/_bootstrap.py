@@ -1,0 +1,60 @@
+"""Shared by the Quick-start commands: make ``.venv`` in the checkout and install the project.
+
+Standard library only, so it runs on a machine that has nothing but python3.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+VENV = ROOT / ".venv"
+BIN = VENV / ("Scripts" if os.name == "nt" else "bin")
+PYTHON = BIN / "python"
+
+
+def say(message: str) -> None:
+    print(f"[nonholonomic] {message}", flush=True)
+
+
+def apt_install(*packages: str) -> bool:
+    """Install Debian packages when we can (root and apt-get present)."""
+    if shutil.which("apt-get") is None or os.geteuid() != 0:
+        return False
+    say(f"installing {' '.join(packages)} with apt-get")
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    subprocess.run(["apt-get", "update", "-qq"], check=False, env=env)
+    return subprocess.run(["apt-get", "install", "-y", "-qq", *packages], check=False, env=env).returncode == 0
+
+
+def _create_venv() -> None:
+    say(f"creating {VENV}")
+    try:
+        venv.EnvBuilder(with_pip=True, clear=True).create(VENV)
+    except (subprocess.CalledProcessError, OSError):
+        # Debian's python3 lacks ensurepip until python3-venv is installed.
+        version = f"python3.{sys.version_info.minor}-venv"
+        if not (apt_install(version) or apt_install("python3-venv")):
+            raise SystemExit("python3 cannot create a virtual environment: install python3-venv and retry")
+        venv.EnvBuilder(with_pip=True, clear=True).create(VENV)
+
+
+def ensure_installed(extras: str = "") -> None:
+    """Create ``.venv`` if needed and ``pip install -e .[extras]`` when pyproject.toml changed."""
+    if not PYTHON.exists():
+        _create_venv()
+    spec = f".[{extras}]" if extras else "."
+    digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes() + spec.encode()).hexdigest()
+    stamp = VENV / f".installed-{extras or 'base'}"
+    if stamp.exists() and stamp.read_text() == digest:
+        return
+    say(f"installing {spec} into .venv (first run downloads heyoka, ~100 MB)")
+    subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
+    subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "-e", spec], check=True, cwd=ROOT)
+    stamp.write_text(digest)

@@ -1,0 +1,149 @@
+"""The real thing: the API under uvicorn, a Celery worker process, Redis; and embedded mode likewise.
+
+Needs Redis on 127.0.0.1:6379 (the README's test command starts one). Uses Redis DB 15 and a
+queue of its own, so a running deployment is not disturbed.
+"""
+
+from __future__ import annotations
+
+import time
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+import redis
+
+from tests.reference import ball_reference
+from tests.support import (
+    TEST_REDIS_URL,
+    free_port,
+    poll_job,
+    redis_available,
+    start_api,
+    start_worker,
+    stop,
+    wait_healthy,
+    wait_until,
+)
+
+pytestmark = pytest.mark.integration
+
+BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7,
+                   "potential": {"kind": "brun", "k": 0.4}},
+        "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 101}
+LIMITS = {"NONHOLONOMIC_MAX_T_FINAL": "1e9"}
+
+
+def _dump_logs(logs: Path) -> str:
+    return "\n".join(f"--- {p.name}\n{p.read_text()[-4000:]}" for p in sorted(logs.glob("*.log")))
+
+
+@pytest.fixture(scope="module")
+def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis]]:
+    if not redis_available():
+        pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
+    store = redis.Redis.from_url(TEST_REDIS_URL)
+    store.flushdb()
+    logs = tmp_path_factory.mktemp("queue-logs")
+    queue = f"test-{uuid.uuid4().hex[:8]}"
+    port = free_port()
+    worker = start_worker(TEST_REDIS_URL, queue, logs / "worker.log", extra_env=LIMITS)
+    api = start_api(port, logs / "api.log", {"REDIS_URL": TEST_REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS})
+    base = f"http://127.0.0.1:{port}"
+    try:
+        wait_healthy(base, timeout=180)
+        with httpx.Client(base_url=base, timeout=10) as client:
+            yield client, store
+    except Exception:
+        print(_dump_logs(logs))
+        raise
+    finally:
+        stop(api)
+        stop(worker)
+        store.flushdb()
+
+
+def test_health_reports_broker_and_worker(queue_stack):
+    client, _ = queue_stack
+    health = client.get("/health").json()
+    assert health["status"] == "ok" and health["mode"] == "queue" and health["broker"] == "ok"
+    assert any(health["queue"] in queues for queues in health["workers"].values())
+
+
+def test_job_runs_on_the_worker_and_matches_an_independent_reference(queue_stack):
+    client, store = queue_stack
+    r = client.post("/v1/jobs", json=BODY)
+    assert r.status_code == 202
+    view = poll_job(client, r.headers["location"], timeout=60)
+    assert view["status"] == "succeeded", view["error"]
+    result = view["result"]
+    ref = ball_reference([2.0, 3.0, 4.5], 0.7, [0.5, -0.2, 0.1, 0.0, 0.6, 0.8], 20.0, k=0.4)
+    final = np.concatenate([result["final_state"]["M"], result["final_state"]["gamma"]])
+    assert np.max(np.abs(final - ref)) <= 1e-10
+    assert all(i["passed"] and i["max_rel_drift"] <= 1e-13 for i in result["integrals"])
+    assert all(c["passed"] for c in result["checks"])
+    assert store.exists(f"nonholonomic:job:{view['id']}")  # the registry knows it
+
+
+def test_unknown_id_is_404_although_celery_says_pending(queue_stack):
+    client, _ = queue_stack
+    r = client.get(f"/v1/jobs/{uuid.uuid4()}")
+    assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
+
+
+def test_invalid_job_is_refused_before_anything_is_queued(queue_stack):
+    client, store = queue_stack
+    before = set(store.scan_iter("nonholonomic:job:*"))
+    r = client.post("/v1/jobs", json={**BODY, "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0, 0, 2]}})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "initial_state.gamma"
+    assert set(store.scan_iter("nonholonomic:job:*")) == before
+
+
+def test_progress_moves_and_cancel_stops_the_running_job(queue_stack):
+    client, _ = queue_stack
+    location = client.post("/v1/jobs", json={**BODY, "t_final": 1e8, "samples": 2}).headers["location"]
+    wait_until(lambda: client.get(location).json()["progress"] > 0, 60, "progress")
+    first = client.get(location).json()
+    time.sleep(0.6)
+    second = client.get(location).json()
+    assert first["status"] == second["status"] == "running"
+    assert 0 < first["progress"] < second["progress"] < 1
+    r = client.delete(location)
+    assert r.status_code == 202 and r.json()["status"] == "cancelled"
+    # With one worker process, a new job can only finish once the cancelled one let go of it.
+    start = time.monotonic()
+    view = poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"], timeout=30)
+    assert view["status"] == "succeeded" and time.monotonic() - start < 10
+    assert client.get(location).json()["status"] == "cancelled"
+
+
+def test_same_request_gives_the_same_numbers(queue_stack):
+    client, _ = queue_stack
+    results = [poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"])["result"] for _ in range(2)]
+    for r in results:
+        r["integration"].pop("wall_time_s")
+    assert results[0] == results[1]
+
+
+def test_embedded_mode_serves_the_same_api_without_redis(tmp_path):
+    port = free_port()
+    api = start_api(port, tmp_path / "api.log", {"REDIS_URL": ""})
+    base = f"http://127.0.0.1:{port}"
+    try:
+        wait_healthy(base, timeout=120)
+        with httpx.Client(base_url=base, timeout=10) as client:
+            assert client.get("/health").json()["mode"] == "embedded"
+            r = client.post("/v1/jobs", json=BODY)
+            assert r.status_code == 202
+            view = poll_job(client, r.headers["location"], timeout=120)
+            assert view["status"] == "succeeded", view["error"]
+            ref = ball_reference([2.0, 3.0, 4.5], 0.7, [0.5, -0.2, 0.1, 0.0, 0.6, 0.8], 20.0, k=0.4)
+            assert np.max(np.abs(np.array(view["result"]["final_state"]["M"]) - ref[:3])) <= 1e-10
+    except Exception:
+        print((tmp_path / "api.log").read_text())
+        raise
+    finally:
+        stop(api)
