@@ -6,12 +6,14 @@ import logging
 from collections.abc import Sequence
 from typing import Any
 
+import redis
 from fastapi import FastAPI, Request
+from kombu.exceptions import OperationalError
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from schemas.problems import INTERNAL, INVALID_REQUEST, PROBLEM_MEDIA_TYPE, FieldError, Problem
+from schemas.problems import INTERNAL, INVALID_REQUEST, PROBLEM_MEDIA_TYPE, UNAVAILABLE, FieldError, Problem
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +86,14 @@ def install_error_handlers(app: FastAPI) -> None:
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         title = {404: "Not Found", 405: "Method Not Allowed"}.get(exc.status_code, "HTTP error")
         return _respond(Problem(title=title, status=exc.status_code, detail=str(exc.detail)), request)
+
+    @app.exception_handler(redis.RedisError)
+    @app.exception_handler(OperationalError)
+    async def _unavailable(request: Request, exc: Exception) -> JSONResponse:
+        log.warning("job store or broker unavailable: %s", exc)
+        return _respond(Problem(type=UNAVAILABLE, title="Service unavailable", status=503,
+                                detail=f"the job store or broker cannot be reached ({type(exc).__name__}); retry later"),
+                        request)
 
     @app.exception_handler(Exception)
     async def _internal(request: Request, exc: Exception) -> JSONResponse:
