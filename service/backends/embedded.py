@@ -4,6 +4,7 @@ Celery task (:func:`workers.jobs.run_job`). For a first run on a bare machine: n
 from __future__ import annotations
 
 import threading
+import time
 import uuid
 from concurrent.futures import ThreadPoolExecutor
 from datetime import datetime, timezone
@@ -17,25 +18,37 @@ from workers.jobs import run_job, warm_up
 
 
 class EmbeddedBackend:
-    """Jobs in memory, run by ``settings.embedded_workers`` threads."""
+    """Jobs in memory, run by ``settings.embedded_workers`` threads; finished jobs are forgotten
+    ``settings.job_ttl_s`` after they were submitted."""
 
     mode = "embedded"
 
     def __init__(self, settings: Settings) -> None:
         self._jobs: dict[str, JobRecord] = {}
         self._cancel: dict[str, threading.Event] = {}
+        self._submitted: dict[str, float] = {}
         self._lock = threading.Lock()
-        self._pool = ThreadPoolExecutor(settings.embedded_workers, thread_name_prefix="nonholonomic-job")
+        self._ttl_s = settings.job_ttl_s
+        self._threads = settings.embedded_workers
+        self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="nonholonomic-job")
         self._warm = self._pool.submit(warm_up) if settings.warm_up else None
 
     def submit(self, request: dict[str, Any]) -> JobRecord:
         job_id = str(uuid.uuid4())
         record = JobRecord(job_id, "queued", 0.0, datetime.now(timezone.utc).isoformat(), request)
         with self._lock:
+            self._forget_expired()
             self._jobs[job_id] = record
             self._cancel[job_id] = threading.Event()
+            self._submitted[job_id] = time.monotonic()
         self._pool.submit(self._run, job_id)
         return record
+
+    def _forget_expired(self) -> None:
+        horizon = time.monotonic() - self._ttl_s
+        for job_id in [j for j, t in self._submitted.items() if t < horizon]:
+            if self._jobs[job_id].status in TERMINAL_STATUSES:
+                del self._jobs[job_id], self._cancel[job_id], self._submitted[job_id]
 
     def _run(self, job_id: str) -> None:
         record, cancelled = self._jobs[job_id], self._cancel[job_id]
@@ -78,7 +91,7 @@ class EmbeddedBackend:
     def health(self) -> dict[str, Any]:
         warm = self._warm is None or self._warm.done()
         return {"ok": True, "mode": self.mode, "broker": "none (embedded)",
-                "workers": {"threads": self._pool._max_workers, "warm": warm}}
+                "workers": {"threads": self._threads, "warm": warm}}
 
     def close(self) -> None:
         for event in self._cancel.values():

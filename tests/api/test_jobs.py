@@ -153,3 +153,15 @@ def test_progress_moves_and_delete_stops_a_running_job(client):
     assert time.monotonic() - start < 5
     assert client.get(location).json()["status"] == "cancelled"
     assert not math.isnan(stopped)
+
+
+def test_a_job_that_raises_is_reported_failed_with_its_reason(client, monkeypatch):
+    import service.backends.embedded as embedded
+
+    def explode(request, progress=None):
+        raise RuntimeError("heyoka stopped at t = 3 with outcome err_nf_state")
+
+    monkeypatch.setattr(embedded, "run_job", explode)
+    view = poll_job(client, submit(client, job()))
+    assert view["status"] == "failed" and view["result"] is None
+    assert view["error"] == {"type": "RuntimeError", "message": "heyoka stopped at t = 3 with outcome err_nf_state"}

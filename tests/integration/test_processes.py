@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 import redis
 
+from celery import Celery
+
 from tests.reference import ball_reference
 from tests.support import (
     TEST_REDIS_URL,
@@ -42,7 +44,7 @@ def _dump_logs(logs: Path) -> str:
 
 
 @pytest.fixture(scope="module")
-def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis]]:
+def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, str]]:
     if not redis_available():
         pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
     store = redis.Redis.from_url(TEST_REDIS_URL)
@@ -56,7 +58,7 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis]]:
     try:
         wait_healthy(base, timeout=180)
         with httpx.Client(base_url=base, timeout=10) as client:
-            yield client, store
+            yield client, store, queue
     except Exception:
         print(_dump_logs(logs))
         raise
@@ -67,14 +69,14 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis]]:
 
 
 def test_health_reports_broker_and_worker(queue_stack):
-    client, _ = queue_stack
+    client, _, _ = queue_stack
     health = client.get("/health").json()
     assert health["status"] == "ok" and health["mode"] == "queue" and health["broker"] == "ok"
     assert any(health["queue"] in queues for queues in health["workers"].values())
 
 
 def test_job_runs_on_the_worker_and_matches_an_independent_reference(queue_stack):
-    client, store = queue_stack
+    client, store, _ = queue_stack
     r = client.post("/v1/jobs", json=BODY)
     assert r.status_code == 202
     view = poll_job(client, r.headers["location"], timeout=60)
@@ -88,14 +90,29 @@ def test_job_runs_on_the_worker_and_matches_an_independent_reference(queue_stack
     assert store.exists(f"nonholonomic:job:{view['id']}")  # the registry knows it
 
 
+def test_a_job_the_worker_refuses_is_reported_failed_with_its_reason(queue_stack):
+    # Bypass the API's validation: register a job and send an invalid request straight to the queue.
+    client, store, queue = queue_stack
+    job_id = str(uuid.uuid4())
+    bad = {**BODY, "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.0, 3.0]}}
+    from workers.registry import RedisJobRegistry
+
+    RedisJobRegistry(store, 600).create(job_id, bad)
+    sender = Celery(broker=TEST_REDIS_URL, backend=TEST_REDIS_URL)
+    sender.send_task("nonholonomic.simulate", args=[bad], task_id=job_id, queue=queue)
+    view = poll_job(client, f"/v1/jobs/{job_id}", timeout=30)
+    assert view["status"] == "failed" and view["result"] is None
+    assert view["error"]["type"] == "InvalidJob" and "initial_state.gamma" in view["error"]["message"]
+
+
 def test_unknown_id_is_404_although_celery_says_pending(queue_stack):
-    client, _ = queue_stack
+    client, _, _ = queue_stack
     r = client.get(f"/v1/jobs/{uuid.uuid4()}")
     assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
 
 
 def test_invalid_job_is_refused_before_anything_is_queued(queue_stack):
-    client, store = queue_stack
+    client, store, _ = queue_stack
     before = set(store.scan_iter("nonholonomic:job:*"))
     r = client.post("/v1/jobs", json={**BODY, "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0, 0, 2]}})
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "initial_state.gamma"
@@ -103,7 +120,7 @@ def test_invalid_job_is_refused_before_anything_is_queued(queue_stack):
 
 
 def test_progress_moves_and_cancel_stops_the_running_job(queue_stack):
-    client, _ = queue_stack
+    client, _, _ = queue_stack
     location = client.post("/v1/jobs", json={**BODY, "t_final": 1e8, "samples": 2}).headers["location"]
     wait_until(lambda: client.get(location).json()["progress"] > 0, 60, "progress")
     first = client.get(location).json()
@@ -121,7 +138,7 @@ def test_progress_moves_and_cancel_stops_the_running_job(queue_stack):
 
 
 def test_same_request_gives_the_same_numbers(queue_stack):
-    client, _ = queue_stack
+    client, _, _ = queue_stack
     results = [poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"])["result"] for _ in range(2)]
     for r in results:
         r["integration"].pop("wall_time_s")
