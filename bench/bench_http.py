@@ -64,6 +64,8 @@ class Latencies:
     submit: list[float]
     polls: list[int]
     job_ids: list[str]
+    #: submit -> succeeded of the first warm-up job (right after /health turned 200 / warm).
+    first_s: float = float("nan")
 
     def pct_ms(self, q: float) -> float:
         return float(np.percentile(self.e2e, q)) * 1e3
@@ -104,9 +106,8 @@ def run_one(client: httpx.Client, posted: list[str], timeout: float = 60.0) -> t
 def measure(base: str, n: int, posted: list[str]) -> Latencies:
     """Warm up with :data:`WARMUP_JOBS` jobs, then time ``n`` sequential jobs (ids go to ``posted``)."""
     with httpx.Client(base_url=base, timeout=30.0) as client:
-        for _ in range(WARMUP_JOBS):
-            run_one(client, posted, timeout=300.0)  # the first may wait for the worker's warm-up
-        out = Latencies([], [], [], [])
+        warm = [run_one(client, posted, timeout=300.0)[0] for _ in range(WARMUP_JOBS)]  # the first may wait
+        out = Latencies([], [], [], [], first_s=warm[0])
         for _ in range(n):
             e2e, submit, polls, job_id = run_one(client, posted)
             out.e2e.append(e2e)
@@ -199,7 +200,8 @@ def describe(name: str, lat: Latencies) -> None:
     """Percentiles of one mode."""
     print(f"{name}: n = {len(lat.e2e)}  p50 {lat.pct_ms(50):.2f} ms  p90 {lat.pct_ms(90):.2f} ms  "
           f"p99 {lat.pct_ms(99):.2f} ms  max {max(lat.e2e) * 1e3:.2f} ms  "
-          f"(POST p50 {statistics.median(lat.submit) * 1e3:.2f} ms, GETs/job median {statistics.median(lat.polls):g})")
+          f"(POST p50 {statistics.median(lat.submit) * 1e3:.2f} ms, GETs/job median {statistics.median(lat.polls):g}; "
+          f"first warm-up job {lat.first_s * 1e3:.1f} ms)")
 
 
 def main() -> None:

@@ -9,6 +9,7 @@ compiled once per (system, tolerance) and process and copied per run. The reduce
 from __future__ import annotations
 
 import copy
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -101,6 +102,19 @@ def heyoka_template(system: MechanicalSystem, tolerance: float) -> hy.taylor_ada
     )
 
 
+_per_thread = threading.local()
+
+
+def _integrator(system: MechanicalSystem, tolerance: float) -> hy.taylor_adaptive:
+    """This thread's own copy of the compiled integrator (copied once per thread, then reused;
+    every run resets its time, state and parameters)."""
+    cache: dict[tuple[MechanicalSystem, float], hy.taylor_adaptive] = _per_thread.__dict__.setdefault("cache", {})
+    key = (system, tolerance)
+    if key not in cache:
+        cache[key] = copy.deepcopy(heyoka_template(system, tolerance))
+    return cache[key]
+
+
 def _versions() -> dict[str, str]:
     return {"heyoka": hy.__version__, "numpy": np.__version__, "scipy": scipy.__version__}
 
@@ -153,9 +167,8 @@ def integrate(
 
 def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, grid: np.ndarray,
                       tol: float, progress: ProgressCallback | None) -> Trajectory:
-    template = heyoka_template(system, tol)  # compiled once per process, not timed
+    ta = _integrator(system, tol)  # compiled once per process, copied once per thread; not timed
     start = time.perf_counter()
-    ta = copy.deepcopy(template)
     ta.time = 0.0
     ta.state[:] = np.append(y0, 0.0)
     ta.pars[:] = p

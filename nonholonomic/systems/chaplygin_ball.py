@@ -103,7 +103,8 @@ def define(potential: str = "zero") -> MechanicalSystem:
     kinetic = dot(M, omega) / 2
 
     integrals = [
-        FirstIntegral("energy", kinetic + U, kinetic + sp.Abs(U), "H = (M, omega)/2 + U(gamma)", "2604-2"),
+        FirstIntegral("energy", kinetic + U, kinetic + pot.scale(gamma, inertia), "H = (M, omega)/2 + U(gamma)",
+                      "2604-2"),
         FirstIntegral("geometric", dot(gamma, gamma), sp.Integer(1), "(gamma, gamma)", "2604-2"),
         FirstIntegral("area", dot(M, gamma), norm_M * sp.sqrt(dot(gamma, gamma)), "c = (M, gamma)", "2604-2"),
     ]

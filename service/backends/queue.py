@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 import uuid
 from typing import Any
 
@@ -16,6 +17,9 @@ from workers.registry import RedisJobRegistry
 from workers.tasks import simulate_job
 
 #: Celery task state → job status.
+#: Seconds a census of the workers stays valid (asking them takes a full inspect timeout).
+WORKER_CENSUS_TTL_S = 5.0
+
 _STATUS = {"PENDING": "queued", "RECEIVED": "queued", "RETRY": "queued", "STARTED": "running",
            "PROGRESS": "running", "SUCCESS": "succeeded", "FAILURE": "failed", "REVOKED": "cancelled"}
 
@@ -29,6 +33,7 @@ class QueueBackend:
         self.settings = settings
         self.redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=5)
         self.registry = RedisJobRegistry(self.redis, settings.job_ttl_s)
+        self._census: tuple[float, dict[str, list[str]]] = (-float("inf"), {})
 
     def submit(self, request: dict[str, Any]) -> JobRecord:
         job_id = str(uuid.uuid4())
@@ -70,13 +75,22 @@ class QueueBackend:
             broker = "ok"
         except redis.RedisError as exc:
             broker = f"unreachable: {exc}"
-        workers: dict[str, Any] = {}
+        workers: dict[str, list[str]] = {}
         if broker == "ok":
-            replies = celery_app.control.inspect(timeout=1.0).active_queues() or {}
-            workers = {name: [q["name"] for q in queues] for name, queues in replies.items()}
+            workers = self._workers()
         serving = [w for w, queues in workers.items() if self.settings.queue in queues]
         return {"ok": broker == "ok" and bool(serving), "mode": self.mode, "broker": broker,
                 "queue": self.settings.queue, "workers": workers}
+
+    def _workers(self) -> dict[str, list[str]]:
+        """Queues consumed by each live worker, cached for :data:`WORKER_CENSUS_TTL_S` when non-empty."""
+        taken_at, workers = self._census
+        if workers and time.monotonic() - taken_at < WORKER_CENSUS_TTL_S:
+            return workers
+        replies = celery_app.control.inspect(timeout=1.0).active_queues() or {}
+        workers = {name: [q["name"] for q in queues] for name, queues in replies.items()}
+        self._census = (time.monotonic(), workers)
+        return workers
 
     def close(self) -> None:
         self.redis.close()

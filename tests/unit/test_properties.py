@@ -11,7 +11,9 @@ from nonholonomic import get_system, simulate
 from nonholonomic.evidence.measure import pointwise_divergence_residual
 
 moment = st.floats(0.2, 5.0)
-component = st.floats(-1.0, 1.0)
+# Components are 0 or of size >= 1e-6: below that, products underflow (|M|² ~ 1e-340) and the
+# pointwise residual |Σ ∂(ρf_i)/∂x_i| / Σ|∂(ρf_i)/∂x_i| compares round-off with round-off.
+component = st.one_of(st.just(0.0), st.floats(1e-6, 1.0), st.floats(-1.0, -1e-6))
 vector = st.tuples(component, component, component)
 
 
