@@ -8,8 +8,7 @@ Kernels are compiled once per system and process (``lru_cache``).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 import sympy as sp
@@ -35,19 +34,48 @@ def vectorize(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> VectorKern
     return evaluate
 
 
-@dataclass(frozen=True)
 class NumericSystem:
-    """The numpy kernels of one system."""
+    """The numpy kernels of one system, each compiled on first use (the API only ever needs
+    ``constraints``; a worker needs them all)."""
 
-    system: MechanicalSystem
-    rhs: VectorKernel
-    integrals: VectorKernel
-    integral_scales: VectorKernel
-    derived: dict[str, VectorKernel]
-    density: VectorKernel
-    divergence_terms: VectorKernel
-    """Columns ``∂(ρ f_i)/∂x_i``: their sum is ``div(ρ f)``, their absolute sum its natural scale."""
-    constraints: VectorKernel
+    def __init__(self, system: MechanicalSystem) -> None:
+        self.system = system
+        self._args = system.state_symbols + system.parameter_symbols
+
+    @cached_property
+    def rhs(self) -> VectorKernel:
+        return vectorize(self.system.rhs, self._args)
+
+    @cached_property
+    def integrals(self) -> VectorKernel:
+        return vectorize([i.expression for i in self.system.integrals] or [sp.Integer(0)], self._args)
+
+    @cached_property
+    def integral_scales(self) -> VectorKernel:
+        return vectorize([i.scale for i in self.system.integrals] or [sp.Integer(1)], self._args)
+
+    @cached_property
+    def derived(self) -> dict[str, VectorKernel]:
+        return {d.name: vectorize(d.expression, self._args) for d in self.system.derived}
+
+    @cached_property
+    def density(self) -> VectorKernel:
+        return vectorize([self.system.measure.density], self._args)
+
+    @cached_property
+    def divergence_terms(self) -> VectorKernel:
+        """Columns ``∂(ρ f_i)/∂x_i``: their sum is ``div(ρ f)``, their absolute sum its natural scale."""
+        return vectorize(divergence_terms(self.system, self.system.measure.density), self._args)
+
+    @cached_property
+    def constraints(self) -> VectorKernel:
+        return vectorize([c.expression for c in self.system.constraints] or [sp.Integer(0)], self._args)
+
+    def compile_all(self) -> None:
+        """Compile every kernel now (a worker's warm-up)."""
+        for name, attr in type(self).__dict__.items():
+            if isinstance(attr, cached_property):
+                getattr(self, name)
 
     def rhs_single(self, y: np.ndarray, p: np.ndarray) -> np.ndarray:
         """``f(y)`` for one phase point (shape ``(dim,)``)."""
@@ -61,18 +89,8 @@ def divergence_terms(system: MechanicalSystem, density: sp.Expr) -> list[sp.Expr
 
 @lru_cache(maxsize=64)
 def numeric(system: MechanicalSystem) -> NumericSystem:
-    """Compile the numpy kernels of ``system`` (once per process)."""
-    args = system.state_symbols + system.parameter_symbols
-    return NumericSystem(
-        system=system,
-        rhs=vectorize(system.rhs, args),
-        integrals=vectorize([i.expression for i in system.integrals] or [sp.Integer(0)], args),
-        integral_scales=vectorize([i.scale for i in system.integrals] or [sp.Integer(1)], args),
-        derived={d.name: vectorize(d.expression, args) for d in system.derived},
-        density=vectorize([system.measure.density], args),
-        divergence_terms=vectorize(divergence_terms(system, system.measure.density), args),
-        constraints=vectorize([c.expression for c in system.constraints] or [sp.Integer(0)], args),
-    )
+    """The numpy kernels of ``system`` (one object per system and process)."""
+    return NumericSystem(system)
 
 
 def parameter_vector(system: MechanicalSystem, values: dict[str, float | Sequence[float]]) -> np.ndarray:

@@ -54,5 +54,5 @@ def warm_up() -> None:
         for potential in potentials:
             system = get_system(kind, potential)
             heyoka_template(system, MACHINE_EPSILON)
-            numeric(system)
+            numeric(system).compile_all()
             symbolic_divergence_vanishes(system)
