@@ -5,14 +5,13 @@ from __future__ import annotations
 from typing import Any
 
 from nonholonomic.definition import Parameter
-from nonholonomic.potentials import POTENTIALS
 from nonholonomic.simulation import CHECKS
 from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
 
 
 def _parameter(par: Parameter) -> dict[str, Any]:
-    return {"name": par.name, "components": [str(s) for s in par.symbols], "meaning": par.meaning,
-            "unit": par.unit, "admissible": par.admissible}
+    return {"name": par.name, "shape": par.shape, "components": [str(s) for s in par.symbols],
+            "meaning": par.meaning, "unit": par.unit, "admissible": par.admissible}
 
 
 def describe(kind: str) -> dict[str, Any]:
@@ -38,19 +37,22 @@ def describe(kind: str) -> dict[str, Any]:
         "title": module.TITLE,
         "equation": base.equation,
         "parameters": [_parameter(p) for p in module.PARAMETERS],
-        "potentials": [{"kind": p, "formula": POTENTIALS[p].formula,
-                        "parameters": [_parameter(q) for q in POTENTIALS[p].parameters]} for p in potentials],
+        "potentials": [{"kind": p, "formula": module.POTENTIALS[p].formula,
+                        "parameters": [_parameter(q) for q in module.POTENTIALS[p].parameters]} for p in potentials],
         "state": [{"name": v.name, "components": [str(s) for s in v.symbols], "meaning": v.meaning, "unit": v.unit}
                   for v in base.state],
         "alternative_inputs": [{"name": a.name, "replaces": a.replaces, "formula": a.formula}
                                for a in base.alternative_inputs],
         "derived": [{"name": d.name, "formula": d.formula, "meaning": d.meaning, "unit": d.unit} for d in base.derived],
-        "constraints": [{"field": c.field, "formula": c.formula, "equation": c.equation, "tolerance": c.tolerance}
+        "constraints": [{"field": c.field, "formula": c.formula, "equation": c.equation, "tolerance": c.tolerance,
+                         "projection": c.projection.formula if c.projection else None}
                         for c in base.constraints],
         "integrals": list(integrals.values()),
         "measure": {"formula": base.measure.formula, "equation": base.measure.equation},
-        "reduced_time": {"formula": base.reduced_time.formula, "equation": base.reduced_time.equation,
-                         "unit": base.reduced_time.unit},
+        "reduced_time": None if base.reduced_time is None else {
+            "formula": base.reduced_time.formula, "equation": base.reduced_time.equation,
+            "unit": base.reduced_time.unit},
+        "notes": list(base.notes),
         "checks": list(CHECKS),
         "time_unit": "s",
     }

@@ -33,18 +33,33 @@ def gradient(expr: sp.Expr, v: sp.Matrix) -> sp.Matrix:
     return sp.Matrix([sp.diff(expr, vi) for vi in v])
 
 
+def symmetric_matrix_symbols(name: str) -> sp.Matrix:
+    """A symmetric 3×3 matrix of six real symbols ``name11, name12, name13, name22, name23, name33``."""
+    sym = {(i, j): sp.Symbol(f"{name}{i + 1}{j + 1}", real=True) for i in range(3) for j in range(i, 3)}
+    return sp.Matrix(3, 3, lambda i, j: sym[(min(i, j), max(i, j))])
+
+
+def upper_triangle(matrix: sp.Matrix) -> tuple[sp.Symbol, ...]:
+    """The six independent entries of a symmetric matrix, in the order 11, 12, 13, 22, 23, 33."""
+    return tuple(matrix[i, j] for i in range(3) for j in range(i, 3))
+
+
 @dataclass(frozen=True)
 class Parameter:
-    """A named group of parameters, as a request spells it (``inertia``, ``D``, ``a`` ...).
+    """A named group of parameters, as a request spells it (``inertia``, ``D``, ``a``, ``B`` ...).
 
     Parameters
     ----------
     name : request name of the group.
-    symbols : the sympy symbols, in order (one for a scalar, three for a vector).
+    symbols : the sympy symbols, in order (one for a scalar, three for a vector, the six entries
+        11, 12, 13, 22, 23, 33 for a symmetric matrix).
     meaning : what it is, in the paper's words.
     unit : unit in the SI-consistent convention of the catalog.
-    minimum : lower bound; ``None`` for any finite number.
+    minimum : lower bound (of every component); ``None`` for any finite number.
     strict : whether the bound excludes the minimum itself (``> minimum``).
+    shape : ``"scalar"``, ``"vector"`` or ``"symmetric_matrix"`` (given as 3 numbers for a diagonal
+        matrix or as a 3×3 nested list).
+    positive_definite : for a symmetric matrix, whether it must be positive definite.
     """
 
     name: str
@@ -53,17 +68,62 @@ class Parameter:
     unit: str
     minimum: float | None = None
     strict: bool = False
+    shape: str = ""
+    positive_definite: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.shape:
+            object.__setattr__(self, "shape", "scalar" if len(self.symbols) == 1 else "vector")
 
     @property
     def admissible(self) -> str:
         """Human-readable admissible range, e.g. ``"> 0"``."""
-        if self.minimum is None:
-            return "any finite number"
-        return f"{'>' if self.strict else '>='} {self.minimum:g}"
+        parts = []
+        if self.shape == "symmetric_matrix":
+            parts.append("symmetric 3x3 matrix, or 3 numbers for a diagonal one")
+            if self.positive_definite:
+                parts.append("positive definite")
+        if self.minimum is not None:
+            parts.append(f"{'>' if self.strict else '>='} {self.minimum:g}")
+        return "; ".join(parts) or "any finite number"
 
     @property
     def is_vector(self) -> bool:
-        return len(self.symbols) > 1
+        return self.shape == "vector"
+
+    def flatten(self, value: object) -> list[float]:
+        """The parameter's symbol values from a request value.
+
+        Raises
+        ------
+        ValueError
+            With the reason, if the value has the wrong shape, is not symmetric or not positive
+            definite, or breaks the bound.
+        """
+        import numpy as np  # local: definitions stay importable without numpy's cost in mind
+
+        array = np.asarray(value, dtype=float)
+        if self.shape == "symmetric_matrix":
+            if array.shape == (3,):
+                array = np.diag(array)
+            if array.shape != (3, 3):
+                raise ValueError("needs 3 numbers (a diagonal matrix) or a 3x3 matrix")
+            if not np.allclose(array, array.T, rtol=1e-12, atol=1e-12 * float(np.max(np.abs(array), initial=0))):
+                raise ValueError("matrix is not symmetric")
+            if self.positive_definite and not np.all(np.linalg.eigvalsh(array) > 0):
+                raise ValueError(f"matrix is not positive definite (eigenvalues {np.linalg.eigvalsh(array).tolist()})")
+            values = [float(array[i, j]) for i in range(3) for j in range(i, 3)]
+        else:
+            values = np.atleast_1d(array).tolist()
+            if len(values) != len(self.symbols):
+                raise ValueError(f"needs {len(self.symbols)} component(s), got {len(values)}")
+        if not all(np.isfinite(values)):
+            raise ValueError("non-finite number")
+        if self.minimum is not None and self.shape != "symmetric_matrix":
+            bad = [v for v in values if (v <= self.minimum if self.strict else v < self.minimum)]
+            if bad:
+                raise ValueError(f"must be {self.admissible}, got {bad[0]:g}")
+        return values
 
 
 @dataclass(frozen=True)
@@ -119,8 +179,21 @@ class FirstIntegral:
 
 
 @dataclass(frozen=True)
+class Projection:
+    """How to move a state onto a constraint: replace the vector ``vector`` by ``expression``."""
+
+    vector: str
+    expression: tuple[sp.Expr, ...]
+    formula: str
+
+
+@dataclass(frozen=True)
 class StateConstraint:
-    """A relation the initial state must satisfy: ``expression == value`` within ``tolerance``."""
+    """A relation the initial state must satisfy: ``|expression − value| ≤ tolerance · max(1, scale)``.
+
+    ``projection`` (optional) moves a state onto the relation; constraints are projected in the
+    order the system lists them.
+    """
 
     field: str
     expression: sp.Expr
@@ -128,6 +201,8 @@ class StateConstraint:
     formula: str
     equation: str
     tolerance: float = 1e-9
+    scale: sp.Expr = sp.Integer(1)
+    projection: Projection | None = None
 
 
 @dataclass(frozen=True)
@@ -154,7 +229,8 @@ class MechanicalSystem:
     """One system with one potential, defined symbolically.
 
     ``rhs`` lists ``d/dt`` of every state symbol in the order of ``state`` (flattened), with all
-    constraint multipliers already eliminated.
+    constraint multipliers already eliminated. ``reduced_time`` is None for systems the paper
+    gives no time substitution for.
     """
 
     kind: str
@@ -166,7 +242,7 @@ class MechanicalSystem:
     rhs: tuple[sp.Expr, ...]
     integrals: tuple[FirstIntegral, ...]
     measure: InvariantMeasure
-    reduced_time: ReducedTime
+    reduced_time: ReducedTime | None
     potential_formula: str
     derived: tuple[DerivedVector, ...] = ()
     alternative_inputs: tuple[AlternativeInput, ...] = ()

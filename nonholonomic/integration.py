@@ -2,8 +2,8 @@
 
 The heyoka integrator is generated from the symbolic right-hand side, with the parameters as
 runtime parameters (``hy.par``), so one compiled integrator serves every parameter value; it is
-compiled once per (system, tolerance) and process and copied per run. The reduced time
-``τ = ∫ ρ dt`` is integrated as one more state variable.
+compiled once per (system, tolerance) and process, and copied once per thread. Where the system
+has a reduced time ``τ = ∫ ρ dt``, it is integrated as one more state variable.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ class Trajectory:
     """
 
     t: np.ndarray
-    tau: np.ndarray
+    tau: np.ndarray | None
     states: np.ndarray
     step_t: np.ndarray
     step_states: np.ndarray
@@ -87,13 +87,16 @@ class StepRecorder:
 
 @lru_cache(maxsize=32)
 def heyoka_template(system: MechanicalSystem, tolerance: float) -> hy.taylor_adaptive:
-    """Compile the Taylor integrator of ``system`` (state + τ) at ``tolerance``, once per process."""
-    names = [str(s) for s in system.state_symbols] + ["tau"]
+    """Compile the Taylor integrator of ``system`` (state, then τ if any) at ``tolerance``, once per process."""
+    names = [str(s) for s in system.state_symbols] + (["tau"] if system.reduced_time else [])
     hvars = hy.make_vars(*names)
+    if len(names) == 1:
+        hvars = [hvars]
     mapping = {s: v for s, v in zip(system.state_symbols, hvars)}
     mapping.update({s: hy.par[i] for i, s in enumerate(system.parameter_symbols)})
     rhs = [hy.from_sympy(f, mapping) for f in system.rhs]
-    rhs.append(hy.from_sympy(system.reduced_time.density, mapping))
+    if system.reduced_time:
+        rhs.append(hy.from_sympy(system.reduced_time.density, mapping))
     return hy.taylor_adaptive(
         list(zip(hvars, rhs)),
         [0.0] * len(hvars),
@@ -168,16 +171,17 @@ def integrate(
 def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, grid: np.ndarray,
                       tol: float, progress: ProgressCallback | None) -> Trajectory:
     ta = _integrator(system, tol)  # compiled once per process, copied once per thread; not timed
+    n = system.dimension
     start = time.perf_counter()
     ta.time = 0.0
-    ta.state[:] = np.append(y0, 0.0)
+    ta.state[:] = np.append(y0, 0.0) if system.reduced_time else y0
     ta.pars[:] = p
     t_final = grid[-1]
     recorder = StepRecorder()
-    recorder.add(0.0, ta.state[:-1])
+    recorder.add(0.0, ta.state[:n])
 
     def on_step(integrator: hy.taylor_adaptive) -> bool:
-        recorder.add(integrator.time, integrator.state[:-1])
+        recorder.add(integrator.time, integrator.state[:n])
         return True if progress is None else bool(progress(min(integrator.time / t_final, 1.0)))
 
     outcome, _, _, nsteps, _, out = ta.propagate_grid(grid, callback=on_step)
@@ -186,7 +190,7 @@ def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, g
     if outcome != hy.taylor_outcome.time_limit:
         raise IntegrationError(f"heyoka stopped at t = {ta.time:g} with outcome {outcome.name}")
     return Trajectory(
-        t=grid, tau=out[:, -1].copy(), states=out[:, :-1].copy(),
+        t=grid, tau=out[:, n].copy() if system.reduced_time else None, states=out[:, :n].copy(),
         step_t=np.asarray(recorder.t), step_states=np.asarray(recorder.states),
         engine="heyoka", tolerance=tol, steps=int(nsteps),
         wall_time_s=time.perf_counter() - start, versions=_versions(),
@@ -199,22 +203,26 @@ def _integrate_scipy(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, gr
     t_final = grid[-1]
     start = time.perf_counter()
 
+    n = system.dimension
+    tau_kernel = numeric(system).time_density if system.reduced_time else None
+
     def f(t: float, y: np.ndarray) -> np.ndarray:
         if progress is not None and not progress(min(t / t_final, 1.0)):
             raise IntegrationCancelled(f"cancelled at t = {t:g}")
-        x = y[:-1]
-        return np.append(kernels.rhs_single(x, p), kernels.density(x[None, :], p)[0, 0])
+        x = y[:n]
+        dx = kernels.rhs_single(x, p)
+        return dx if tau_kernel is None else np.append(dx, tau_kernel(x[None, :], p)[0, 0])
 
-    sol = solve_ivp(f, (0.0, t_final), np.append(y0, 0.0), method="DOP853", rtol=tol, atol=tol,
-                    dense_output=True)
+    y_start = y0 if tau_kernel is None else np.append(y0, 0.0)
+    sol = solve_ivp(f, (0.0, t_final), y_start, method="DOP853", rtol=tol, atol=tol, dense_output=True)
     if not sol.success:
         raise IntegrationError(f"scipy DOP853 failed: {sol.message}")
     out = sol.sol(grid).T
-    out[0] = np.append(y0, 0.0)
+    out[0] = y_start
     out[-1] = sol.y[:, -1]
     return Trajectory(
-        t=grid, tau=out[:, -1].copy(), states=out[:, :-1].copy(),
-        step_t=sol.t.copy(), step_states=sol.y[:-1].T.copy(),
+        t=grid, tau=out[:, n].copy() if tau_kernel is not None else None, states=out[:, :n].copy(),
+        step_t=sol.t.copy(), step_states=sol.y[:n].T.copy(),
         engine="scipy", tolerance=tol, steps=len(sol.t) - 1,
         wall_time_s=time.perf_counter() - start, versions=_versions(),
     )

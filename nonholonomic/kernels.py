@@ -63,6 +63,23 @@ class NumericSystem:
         return vectorize([self.system.measure.density], self._args)
 
     @cached_property
+    def time_density(self) -> VectorKernel:
+        """``dτ/dt`` of the reduced time (only for systems that have one)."""
+        if self.system.reduced_time is None:
+            raise AttributeError(f"{self.system.kind} has no reduced time")
+        return vectorize([self.system.reduced_time.density], self._args)
+
+    @cached_property
+    def constraint_scales(self) -> VectorKernel:
+        return vectorize([c.scale for c in self.system.constraints] or [sp.Integer(1)], self._args)
+
+    @cached_property
+    def projections(self) -> list[VectorKernel | None]:
+        """Per constraint: the kernel giving its projected vector, or None if it has no projection."""
+        return [vectorize(c.projection.expression, self._args) if c.projection else None
+                for c in self.system.constraints]
+
+    @cached_property
     def divergence_terms(self) -> VectorKernel:
         """Columns ``∂(ρ f_i)/∂x_i``: their sum is ``div(ρ f)``, their absolute sum its natural scale."""
         return vectorize(divergence_terms(self.system, self.system.measure.density), self._args)
@@ -74,7 +91,7 @@ class NumericSystem:
     def compile_all(self) -> None:
         """Compile every kernel now (a worker's warm-up)."""
         for name, attr in type(self).__dict__.items():
-            if isinstance(attr, cached_property):
+            if isinstance(attr, cached_property) and (name != "time_density" or self.system.reduced_time):
                 getattr(self, name)
 
     def rhs_single(self, y: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -93,24 +110,24 @@ def numeric(system: MechanicalSystem) -> NumericSystem:
     return NumericSystem(system)
 
 
-def parameter_vector(system: MechanicalSystem, values: dict[str, float | Sequence[float]]) -> np.ndarray:
-    """Flatten named parameter groups (``{"inertia": [..], "D": ..}``) in the system's order.
+def parameter_vector(system: MechanicalSystem, values: dict[str, object]) -> np.ndarray:
+    """Flatten named parameter groups (``{"inertia": [..], "D": .., "B": [[..]]}``) in the system's order.
 
     Raises
     ------
     KeyError
         If a group is missing.
     ValueError
-        If a group has the wrong number of components.
+        If a group has the wrong shape or value (the message starts with the group's name).
     """
     out: list[float] = []
     for par in system.parameters:
         if par.name not in values:
             raise KeyError(par.name)
-        v = np.atleast_1d(np.asarray(values[par.name], dtype=float))
-        if v.shape != (len(par.symbols),):
-            raise ValueError(f"parameter {par.name!r} needs {len(par.symbols)} component(s), got {v.size}")
-        out.extend(v.tolist())
+        try:
+            out.extend(par.flatten(values[par.name]))
+        except ValueError as exc:
+            raise ValueError(f"{par.name}: {exc}") from None
     return np.asarray(out, dtype=float)
 
 

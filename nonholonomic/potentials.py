@@ -1,17 +1,22 @@
-"""Potentials U(γ) of an axisymmetric external field (paper, sections on Veselova and the ball).
+"""Potentials U of the external field, as symbolic building blocks.
 
-Each potential is a symbolic expression in the unit vertical γ (and, for Brun's field, in the
-inertia tensor I), with its own named parameters.
+A potential acts on named state vectors (``gamma``, ``E``, ``x``) and may use the inertia tensor
+(Brun's field). Each system module lists the potentials it accepts in its ``POTENTIALS`` dict,
+built with the factories below, so the same request name (``linear``) can mean (a, γ) for a body
+and (a, x) for a ball on a surface.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import sympy as sp
 
-from nonholonomic.definition import Parameter, dot, vector_symbols
+from nonholonomic.definition import Parameter, dot, symmetric_matrix_symbols, upper_triangle, vector_symbols
+
+Variables = Mapping[str, sp.Matrix]
+"""State vectors by name, plus ``"I"``: the inertia tensor, where the system has one."""
 
 
 @dataclass(frozen=True)
@@ -21,36 +26,81 @@ class Potential:
     kind: str
     formula: str
     parameters: tuple[Parameter, ...]
-    build: Callable[[sp.Matrix, sp.Matrix], sp.Expr]
-    """``build(gamma, I)`` → U as a sympy expression."""
-    scale: Callable[[sp.Matrix, sp.Matrix], sp.Expr]
-    """``scale(gamma, I)`` → the size of U's variation (e.g. |a||γ|), used to judge energy drift
+    build: Callable[[Variables], sp.Expr]
+    """``build(variables)`` → U as a sympy expression."""
+    scale: Callable[[Variables], sp.Expr]
+    """``scale(variables)`` → the size of U's variation (e.g. |a||γ|), used to judge energy drift
     when U itself happens to vanish at the initial state."""
 
 
-_a = vector_symbols("a")
-_k = sp.Symbol("k", real=True)
+def _vector(name: str, meaning: str, unit: str) -> tuple[sp.Matrix, Parameter]:
+    v = vector_symbols(name)
+    return v, Parameter(name, tuple(v), meaning, unit)
 
-ZERO = Potential(kind="zero", formula="U = 0", parameters=(), build=lambda gamma, inertia: sp.Integer(0),
-                 scale=lambda gamma, inertia: sp.Integer(0))
 
-LINEAR = Potential(
-    kind="linear",
-    formula="U = (a, gamma)",
-    parameters=(
-        Parameter("a", tuple(_a), "field vector of the linear potential (a, γ) (e.g. m g r_c for a shifted centre)",
-                  "kg m^2/s^2"),
-    ),
-    build=lambda gamma, inertia: dot(_a, gamma),
-    scale=lambda gamma, inertia: sp.sqrt(dot(_a, _a) * dot(gamma, gamma)),
-)
+ZERO = Potential(kind="zero", formula="U = 0", parameters=(), build=lambda v: sp.Integer(0),
+                 scale=lambda v: sp.Integer(0))
 
-BRUN = Potential(
-    kind="brun",
-    formula="U = k/2 (gamma, I gamma)",
-    parameters=(Parameter("k", (_k,), "strength of Brun's field k/2 (γ, Iγ)", "1/s^2"),),
-    build=lambda gamma, inertia: _k / 2 * dot(gamma, inertia * gamma),
-    scale=lambda gamma, inertia: sp.Abs(_k) / 2 * dot(gamma, inertia * gamma),
-)
 
-POTENTIALS: dict[str, Potential] = {p.kind: p for p in (ZERO, LINEAR, BRUN)}
+def linear(on: str = "gamma", also_on: str | None = None) -> Potential:
+    """``U = (a, v)`` on the vector ``on`` (plus ``(b, w)`` on ``also_on``)."""
+    a, par_a = _vector("a", f"field vector of the linear potential (a, {on})", "kg m^2/s^2")
+    parameters = (par_a,)
+    formula = f"U = (a, {on})"
+    if also_on is not None:
+        b, par_b = _vector("b", f"field vector of the term (b, {also_on})", "kg m^2/s^2")
+        parameters += (par_b,)
+        formula += f" + (b, {also_on})"
+
+        def build(v: Variables) -> sp.Expr:
+            return dot(a, v[on]) + dot(b, v[also_on])
+
+        def scale(v: Variables) -> sp.Expr:
+            return sp.sqrt(dot(a, a) * dot(v[on], v[on])) + sp.sqrt(dot(b, b) * dot(v[also_on], v[also_on]))
+    else:
+        def build(v: Variables) -> sp.Expr:
+            return dot(a, v[on])
+
+        def scale(v: Variables) -> sp.Expr:
+            return sp.sqrt(dot(a, a) * dot(v[on], v[on]))
+
+    return Potential("linear", formula, parameters, build, scale)
+
+
+def brun(on: str = "gamma") -> Potential:
+    """Brun's field ``U = k/2 (v, I v)`` (needs the inertia tensor ``I``)."""
+    k = sp.Symbol("k", real=True)
+    return Potential(
+        "brun", f"U = k/2 ({on}, I {on})",
+        (Parameter("k", (k,), f"strength of Brun's field k/2 ({on}, I {on})", "1/s^2"),),
+        build=lambda v: k / 2 * dot(v[on], v["I"] * v[on]),
+        scale=lambda v: sp.Abs(k) / 2 * dot(v[on], v["I"] * v[on]),
+    )
+
+
+def quadratic(on: str = "gamma") -> Potential:
+    """``U = ½ (v, K v)`` with a symmetric matrix K."""
+    K = symmetric_matrix_symbols("K")
+    return Potential(
+        "quadratic", f"U = 1/2 ({on}, K {on})",
+        (Parameter("K", upper_triangle(K), f"symmetric matrix of the quadratic potential 1/2 ({on}, K {on})",
+                   "kg m^2/s^2", shape="symmetric_matrix"),),
+        build=lambda v: dot(v[on], K * v[on]) / 2,
+        scale=lambda v: sp.sqrt(sum(e**2 for e in K)) * dot(v[on], v[on]) / 2,
+    )
+
+
+def harmonic(on: str = "x") -> Potential:
+    """``U = k/2 (v, v)``: an isotropic spring to the origin."""
+    k = sp.Symbol("k", real=True)
+    return Potential(
+        "harmonic", f"U = k/2 ({on}, {on})",
+        (Parameter("k", (k,), f"stiffness of the isotropic potential k/2 ({on}, {on})", "kg/s^2"),),
+        build=lambda v: k / 2 * dot(v[on], v[on]),
+        scale=lambda v: sp.Abs(k) / 2 * dot(v[on], v[on]),
+    )
+
+
+def catalog_of(*potentials: Potential) -> dict[str, Potential]:
+    """A system's ``POTENTIALS`` dict from the potentials it accepts."""
+    return {p.kind: p for p in potentials}

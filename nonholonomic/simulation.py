@@ -26,6 +26,19 @@ class FieldProblem:
 
 
 @dataclass(frozen=True)
+class ProjectionReport:
+    """What projecting the initial state onto one constraint changed."""
+
+    field: str
+    constraint: str
+    projection: str
+    value_before: float
+    value_after: float
+    change: float
+    """max |component change| of the projected vector"""
+
+
+@dataclass(frozen=True)
 class SimulationResult:
     """A trajectory with its evidence. Arrays are at the sample times."""
 
@@ -36,24 +49,25 @@ class SimulationResult:
     integrals: list[IntegralEvidence]
     checks: list[CheckEvidence]
     warnings: list[str] = field(default_factory=list)
+    projections: list[ProjectionReport] = field(default_factory=list)
 
     def state(self, name: str) -> np.ndarray:
         """Samples of the state vector ``name`` (shape ``(n, 3)``), or of a derived vector."""
         if name in self.derived:
             return self.derived[name]
-        offset = 0
-        for vec in self.system.state:
-            if vec.name == name:
-                return self.trajectory.states[:, offset:offset + len(vec.symbols)]
-            offset += len(vec.symbols)
-        raise KeyError(name)
+        return self.trajectory.states[:, _vector_slice(self.system, name)]
 
 
-def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, object],
-                           initial_state: Mapping[str, Sequence[float]]) -> list[FieldProblem]:
-    """Everything wrong with ``initial_state`` for ``system``: unknown, missing or doubly given
-    vectors, and violated constraints (e.g. |γ| ≠ 1 beyond 1e-9). Field paths start with
-    ``initial_state``."""
+def _vector_slice(system: MechanicalSystem, name: str) -> slice:
+    offset = 0
+    for vec in system.state:
+        if vec.name == name:
+            return slice(offset, offset + len(vec.symbols))
+        offset += len(vec.symbols)
+    raise KeyError(name)
+
+
+def _name_problems(system: MechanicalSystem, initial_state: Mapping[str, Sequence[float]]) -> list[FieldProblem]:
     problems: list[FieldProblem] = []
     names = [v.name for v in system.state]
     alternatives = {a.name: a for a in system.alternative_inputs}
@@ -71,19 +85,63 @@ def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, ob
         elif len(givers) > 1:
             problems.append(FieldProblem(f"initial_state.{givers[1]}",
                                          f"give only one of {', '.join(givers)}: they describe the same state"))
-    if problems:
-        return problems
-    p = parameter_vector(system, dict(parameters))  # type: ignore[arg-type]
-    y = state_vector(system, dict(initial_state), p)
-    values = numeric(system).constraints(y[None, :], p)[0]
-    for constraint, value in zip(system.constraints, values):
+    return problems
+
+
+def project_initial_state(system: MechanicalSystem, p: np.ndarray,
+                          y: np.ndarray) -> tuple[np.ndarray, list[ProjectionReport]]:
+    """Move ``y`` onto every constraint that has a projection, in the order the system lists them."""
+    kernels = numeric(system)
+    y = y.copy()
+    reports: list[ProjectionReport] = []
+    for i, (constraint, project) in enumerate(zip(system.constraints, kernels.projections)):
+        if project is None:
+            continue
+        before = float(kernels.constraints(y[None, :], p)[0, i])
+        where = _vector_slice(system, constraint.projection.vector)  # type: ignore[union-attr]
+        new = project(y[None, :], p)[0]
+        change = float(np.max(np.abs(new - y[where])))
+        y[where] = new
+        after = float(kernels.constraints(y[None, :], p)[0, i])
+        if change > 0:
+            reports.append(ProjectionReport(f"initial_state.{constraint.field}", constraint.formula,
+                                            constraint.projection.formula, before, after, change))  # type: ignore[union-attr]
+    return y, reports
+
+
+def constraint_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
+    """Constraints ``y`` violates beyond their tolerance."""
+    kernels = numeric(system)
+    values = kernels.constraints(y[None, :], p)[0]
+    scales = kernels.constraint_scales(y[None, :], p)[0]
+    problems = []
+    for constraint, value, scale in zip(system.constraints, values, scales):
         deviation = float(value - constraint.value)
-        if not np.isfinite(deviation) or abs(deviation) > constraint.tolerance:
+        allowed = constraint.tolerance * max(1.0, float(abs(scale)))
+        if not np.isfinite(deviation) or abs(deviation) > allowed:
             problems.append(FieldProblem(
                 f"initial_state.{constraint.field}",
                 f"violates {constraint.formula} (eq. {constraint.equation}): value {value:.12g}, "
-                f"off by {deviation:.3g} (tolerance {constraint.tolerance:g})"))
+                f"off by {deviation:.3g} (tolerance {allowed:.3g})"
+                + ("; set project_initial_state to project it" if constraint.projection else "")))
     return problems
+
+
+def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, object],
+                           initial_state: Mapping[str, Sequence[float]], project: bool = False) -> list[FieldProblem]:
+    """Everything wrong with ``initial_state`` for ``system``: unknown, missing or doubly given
+    vectors, and violated constraints (e.g. |γ| ≠ 1 beyond 1e-9) — after projection if ``project``
+    (a constraint without a projection, or a projection that cannot restore it, still counts).
+    Field paths start with ``initial_state``."""
+    problems = _name_problems(system, initial_state)
+    if problems:
+        return problems
+    p = parameter_vector(system, dict(parameters))
+    y = state_vector(system, dict(initial_state), p)
+    if project:
+        with np.errstate(all="ignore"):
+            y, _ = project_initial_state(system, p, y)
+    return constraint_problems(system, p, y)
 
 
 def parameter_warnings(system: MechanicalSystem, parameters: Mapping[str, object]) -> list[str]:
@@ -108,6 +166,7 @@ def simulate(
     samples: int,
     *,
     checks: Sequence[str] = CHECKS,
+    project: bool = False,
     engine: str = "heyoka",
     tolerance: float | None = None,
     progress: ProgressCallback | None = None,
@@ -119,6 +178,8 @@ def simulate(
     parameters : named parameter groups (``{"inertia": [..], "D": .., "a": [..]}``).
     initial_state : named state vectors, or their alternatives (``omega`` for the ball's ``M``).
     checks : a subset of :data:`CHECKS`.
+    project : move the initial state onto the constraints first (reported in ``projections``)
+        instead of refusing a state off them.
 
     Raises
     ------
@@ -128,15 +189,18 @@ def simulate(
     unknown = sorted(set(checks) - set(CHECKS))
     if unknown:
         raise ValueError(f"unknown checks {unknown}; known: {CHECKS}")
-    problems = initial_state_problems(system, parameters, initial_state)
+    problems = initial_state_problems(system, parameters, initial_state, project)
     if problems:
         raise ValueError("; ".join(f"{p.field}: {p.reason}" for p in problems))
-    p = parameter_vector(system, dict(parameters))  # type: ignore[arg-type]
+    p = parameter_vector(system, dict(parameters))
     y0 = state_vector(system, dict(initial_state), p)
+    projections: list[ProjectionReport] = []
+    if project:
+        y0, projections = project_initial_state(system, p, y0)
     trajectory = integrate(system, p, y0, t_final, samples, engine=engine, tolerance=tolerance, progress=progress)
     kernels = numeric(system)
     derived = {name: fn(trajectory.states, p) for name, fn in kernels.derived.items()}
     integrals = integral_evidence(system, p, trajectory) if "integrals" in checks else []
     evidence = measure_evidence(system, p, trajectory.states) if "measure" in checks else []
     return SimulationResult(system, p, trajectory, derived, integrals, evidence,
-                            parameter_warnings(system, parameters))
+                            parameter_warnings(system, parameters), projections)

@@ -50,6 +50,9 @@ class JobRequest(BaseModel):
     checks: list[Literal["integrals", "measure"]] = Field(
         default_factory=lambda: list(CHECKS), description="evidence to compute")
     integrator: IntegratorOptions = Field(default_factory=IntegratorOptions)
+    project_initial_state: bool = Field(
+        False, description="move an initial state that is off a constraint (|gamma| = 1, (omega, gamma) = 0, "
+                           "the quadric ...) onto it, and report what changed, instead of refusing it")
 
     @field_validator("t_final")
     @classmethod
@@ -70,7 +73,7 @@ class JobRequest(BaseModel):
     def problems(self) -> list[FieldProblem]:
         """Violations only the physics can see: state names, |γ| = 1, the engine's tolerance range."""
         found = initial_state_problems(self.system.definition(), self.system.parameter_values(),  # type: ignore[attr-defined]
-                                       self.initial_state)
+                                       self.initial_state, self.project_initial_state)
         tol = self.integrator.tolerance
         if self.integrator.engine == "scipy" and tol is not None and tol < SCIPY_MIN_TOLERANCE:
             found.append(FieldProblem("integrator.tolerance",

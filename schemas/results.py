@@ -50,7 +50,8 @@ class IntegrationInfo(BaseModel):
 
 class TimeInfo(BaseModel):
     t: str = "physical time t [s]"
-    tau: str = Field(description="reduced time of the Hamiltonization, with its formula and equation")
+    tau: str | None = Field(description="reduced time of the Hamiltonization, with its formula and equation "
+                                        "(null for systems without one)")
 
 
 class SystemInfo(BaseModel):
@@ -68,14 +69,27 @@ class Trajectory(BaseModel):
 
     model_config = ConfigDict(extra="allow")
     t: list[float]
-    tau: list[float]
+    tau: list[float] | None
+
+
+class ProjectionItem(BaseModel):
+    """What projecting the initial state onto one constraint changed (``project_initial_state``)."""
+
+    field: str
+    constraint: str
+    projection: str
+    value_before: float
+    value_after: float
+    change: float = Field(description="max |component change| of the projected vector")
 
 
 class SimulationResultModel(BaseModel):
     system: SystemInfo
+    initial_state: dict[str, list[float]] = Field(description="the state integrated from (after any projection)")
+    projections: list[ProjectionItem]
     final_state: dict[str, list[float]]
     t_final: float
-    tau_final: float
+    tau_final: float | None
     time: TimeInfo
     trajectory: Trajectory
     integrals: list[IntegralItem]
@@ -89,7 +103,8 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
     system = result.system
     traj = result.trajectory
     vectors = [v.name for v in system.state] + [d.name for d in system.derived]
-    units = {"t": "s", "tau": system.reduced_time.unit}
+    reduced = system.reduced_time
+    units = {"t": "s", **({"tau": reduced.unit} if reduced else {})}
     units.update({v.name: v.unit for v in system.state})
     units.update({d.name: d.unit for d in system.derived})
     units.update({p.name: p.unit for p in system.parameters})
@@ -98,12 +113,15 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
         "system": {"kind": system.kind, "title": system.title, "equation": system.equation,
                    "potential": system.potential, "potential_formula": system.potential_formula,
                    "parameters": parameters, "units": units},
+        "initial_state": {name: values[0] for name, values in samples.items()},
+        "projections": [asdict(p) for p in result.projections],
         "final_state": {name: values[-1] for name, values in samples.items()},
         "t_final": float(traj.t[-1]),
-        "tau_final": float(traj.tau[-1]),
+        "tau_final": None if traj.tau is None else float(traj.tau[-1]),
         "time": {"t": "physical time t [s]",
-                 "tau": f"reduced time, {system.reduced_time.formula} (eq. {system.reduced_time.equation}), tau(0) = 0"},
-        "trajectory": {"t": traj.t.tolist(), "tau": traj.tau.tolist(), **samples},
+                 "tau": None if reduced is None else
+                 f"reduced time, {reduced.formula} (eq. {reduced.equation}), tau(0) = 0"},
+        "trajectory": {"t": traj.t.tolist(), "tau": None if traj.tau is None else traj.tau.tolist(), **samples},
         "integrals": [asdict(i) for i in result.integrals],
         "checks": [asdict(c) for c in result.checks],
         "integration": {"engine": traj.engine, "tolerance": traj.tolerance, "steps": traj.steps,

@@ -9,18 +9,29 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, create_model
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, create_model
 
 from nonholonomic.definition import MechanicalSystem, Parameter
-from nonholonomic.potentials import POTENTIALS
-from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
+from nonholonomic.potentials import Potential
+from nonholonomic.systems import SYSTEMS, get_system
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
+Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 
 
 def _camel(name: str) -> str:
     return "".join(part.capitalize() for part in name.split("_"))
+
+
+def _checked_by_core(par: Parameter) -> AfterValidator:
+    """Run the core's own check of a matrix parameter (symmetry, definiteness) as a field validator."""
+
+    def check(value: Any) -> Any:
+        par.flatten(value)  # raises ValueError with the reason
+        return value
+
+    return AfterValidator(check)
 
 
 def _parameter_field(par: Parameter) -> tuple[Any, Any]:
@@ -28,7 +39,11 @@ def _parameter_field(par: Parameter) -> tuple[Any, Any]:
     if par.minimum is not None:
         bounds["gt" if par.strict else "ge"] = par.minimum
     number = Annotated[float, Field(allow_inf_nan=False, **bounds)]
-    annotation = Annotated[list[number], Field(min_length=3, max_length=3)] if par.is_vector else number
+    annotation: Any = number
+    if par.shape == "vector":
+        annotation = Annotated[list[number], Field(min_length=3, max_length=3)]
+    elif par.shape == "symmetric_matrix":
+        annotation = Annotated[Union[Vec3, Mat3], _checked_by_core(par)]
     return annotation, Field(description=f"{par.meaning} [{par.unit}]; {par.admissible}")
 
 
@@ -57,30 +72,29 @@ class SystemSpec(BaseModel):
         return get_system(self.kind, self.potential.kind)  # type: ignore[attr-defined]
 
 
-POTENTIAL_MODELS: dict[str, type[PotentialSpec]] = {
-    pot.kind: create_model(  # type: ignore[call-overload]
-        f"{_camel(pot.kind)}Potential",
+def _potential_model(kind: str, pot: Potential) -> type[PotentialSpec]:
+    return create_model(  # type: ignore[call-overload]
+        f"{_camel(kind)}{_camel(pot.kind)}Potential",
         __base__=PotentialSpec,
         __doc__=pot.formula,
         kind=(Literal[pot.kind], ...),
         **{par.name: _parameter_field(par) for par in pot.parameters},
     )
-    for pot in POTENTIALS.values()
-}
 
 
 def _system_model(kind: str) -> type[SystemSpec]:
     module = SYSTEMS[kind]
-    allowed = [POTENTIAL_MODELS[p] for p in SUPPORTED_POTENTIALS[kind]]
+    allowed = [_potential_model(kind, pot) for pot in module.POTENTIALS.values()]
     potential_union = Annotated[Union[tuple(allowed)], Field(discriminator="kind")]  # type: ignore[valid-type]
+    default, default_kind = allowed[0], next(iter(module.POTENTIALS))
     return create_model(  # type: ignore[call-overload]
         f"{_camel(kind)}Spec",
         __base__=SystemSpec,
         __doc__=module.TITLE,
         kind=(Literal[kind], ...),
         **{par.name: _parameter_field(par) for par in module.PARAMETERS},
-        potential=(potential_union, Field(default_factory=lambda: POTENTIAL_MODELS["zero"](kind="zero"),
-                                          description=f"one of: {', '.join(SUPPORTED_POTENTIALS[kind])}")),
+        potential=(potential_union, Field(default_factory=lambda: default(kind=default_kind),
+                                          description=f"one of: {', '.join(module.POTENTIALS)} (default {list(module.POTENTIALS)[0]})")),
     )
 
 

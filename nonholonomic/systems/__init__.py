@@ -1,7 +1,7 @@
 """The systems of the paper, one module each; :data:`SYSTEMS` maps a request's ``kind`` to it.
 
-Adding a system is one new module exposing ``KIND``, ``TITLE``, ``PARAMETERS``, ``STATE`` and
-``define(potential) -> MechanicalSystem``, plus its entry here and its tests.
+Adding a system is one new module exposing ``KIND``, ``TITLE``, ``PARAMETERS``, ``STATE``,
+``POTENTIALS`` and ``define(potential) -> MechanicalSystem``, plus its entry here and its tests.
 """
 
 from __future__ import annotations
@@ -9,13 +9,12 @@ from __future__ import annotations
 from types import ModuleType
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.potentials import POTENTIALS
 from nonholonomic.systems import chaplygin_ball
 
-SYSTEMS: dict[str, ModuleType] = {chaplygin_ball.KIND: chaplygin_ball}
+SYSTEMS: dict[str, ModuleType] = {module.KIND: module for module in (chaplygin_ball,)}
 
 #: Potentials each kind accepts.
-SUPPORTED_POTENTIALS: dict[str, tuple[str, ...]] = {chaplygin_ball.KIND: ("zero", "linear", "brun")}
+SUPPORTED_POTENTIALS: dict[str, tuple[str, ...]] = {kind: tuple(m.POTENTIALS) for kind, m in SYSTEMS.items()}
 
 
 def get_system(kind: str, potential: str = "zero") -> MechanicalSystem:
@@ -28,6 +27,6 @@ def get_system(kind: str, potential: str = "zero") -> MechanicalSystem:
     """
     if kind not in SYSTEMS:
         raise KeyError(f"unknown system kind {kind!r}; known: {sorted(SYSTEMS)}")
-    if potential not in SUPPORTED_POTENTIALS[kind] or potential not in POTENTIALS:
+    if potential not in SYSTEMS[kind].POTENTIALS:
         raise KeyError(f"system {kind!r} does not support potential {potential!r}")
     return SYSTEMS[kind].define(potential)

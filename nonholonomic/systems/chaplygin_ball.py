@@ -33,7 +33,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
-from nonholonomic.potentials import POTENTIALS
+from nonholonomic.potentials import ZERO, brun, catalog_of, linear
 
 KIND = "chaplygin_ball"
 TITLE = "Chaplygin's ball rolling without slipping on a horizontal plane"
@@ -77,6 +77,8 @@ PARAMETERS = (
     Parameter("D", (D,), "D = m R^2 (mass times squared radius)", "kg m^2", minimum=0.0),
 )
 
+POTENTIALS = catalog_of(ZERO, linear("gamma"), brun("gamma"))
+
 STATE = (
     StateVector("M", tuple(M), "angular momentum about the contact point, body frame", "kg m^2/s"),
     StateVector("gamma", tuple(gamma), "unit vertical in the body frame", "1"),
@@ -95,7 +97,8 @@ def define(potential: str = "zero") -> MechanicalSystem:
         ``dτ = ρ_μ dt`` (eq. 2604-5).
     """
     pot = POTENTIALS[potential]
-    U = pot.build(gamma, inertia)
+    variables = {"gamma": gamma, "I": inertia}
+    U = pot.build(variables)
     omega = contact_inertia_inverse() * M
     rhs = list(cross(M, omega) + cross(gamma, gradient(U, gamma))) + list(cross(gamma, omega))
     rho = measure_density()
@@ -103,7 +106,7 @@ def define(potential: str = "zero") -> MechanicalSystem:
     kinetic = dot(M, omega) / 2
 
     integrals = [
-        FirstIntegral("energy", kinetic + U, kinetic + pot.scale(gamma, inertia), "H = (M, omega)/2 + U(gamma)",
+        FirstIntegral("energy", kinetic + U, kinetic + pot.scale(variables), "H = (M, omega)/2 + U(gamma)",
                       "2604-2"),
         FirstIntegral("geometric", dot(gamma, gamma), sp.Integer(1), "(gamma, gamma)", "2604-2"),
         FirstIntegral("area", dot(M, gamma), norm_M * sp.sqrt(dot(gamma, gamma)), "c = (M, gamma)", "2604-2"),
