@@ -20,7 +20,7 @@ class IntegralItem(BaseModel):
     final: float
     max_abs_drift: float
     max_rel_drift: float = Field(description="max_abs_drift / reference")
-    reference: float = Field(description="max(|initial|, natural scale of the integral at t = 0)")
+    reference: float = Field(description="max(|initial|, largest natural scale of the integral along the trajectory)")
     evaluated_at: int = Field(description="number of states evaluated (samples + accepted steps)")
     tolerance: float = Field(description="bound on max_rel_drift for the verdict")
     passed: bool

@@ -26,8 +26,8 @@ class IntegralEvidence:
     """One first integral along a trajectory.
 
     ``max_rel_drift = max_abs_drift / reference`` with ``reference = max(|initial|, scale)``, where
-    ``scale`` is the integral's natural size at t = 0 (e.g. ``|M||γ|`` for ``c = (M, γ)``), so that
-    an integral whose value is zero still gets a meaningful relative drift.
+    ``scale`` is the largest natural size of the integral along the trajectory (e.g. ``|M||γ|`` for
+    ``c = (M, γ)``), so that an integral whose value is zero still gets a meaningful relative drift.
     """
 
     name: str
@@ -60,7 +60,7 @@ def integral_evidence(system: MechanicalSystem, parameters: np.ndarray, trajecto
     values = kernels.integrals(points, parameters)
     initial = values[0]
     final = values[len(trajectory.t) - 1]
-    scale = np.abs(kernels.integral_scales(points[:1], parameters)[0])
+    scale = np.max(np.abs(kernels.integral_scales(points, parameters)), axis=0)
     reference = np.maximum(np.abs(initial), scale)
     reference = np.where(reference > 0, reference, 1.0)
     abs_drift = np.max(np.abs(values - initial), axis=0)
