@@ -54,6 +54,7 @@ def describe(kind: str) -> dict[str, Any]:
             "unit": base.reduced_time.unit},
         "notes": list(base.notes),
         "checks": list(CHECKS),
+        "example": getattr(module, "EXAMPLE", None),
         "time_unit": "s",
     }
 

@@ -79,6 +79,13 @@ PARAMETERS = (
 
 POTENTIALS = catalog_of(ZERO, linear("gamma"), brun("gamma"))
 
+#: A job request for this kind (the catalog shows it; tests and benchmarks run it).
+EXAMPLE = {
+    "system": {"kind": KIND, "inertia": [2.0, 3.0, 4.5], "D": 0.7, "potential": {"kind": "zero"}},
+    "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]},
+    "t_final": 1000.0, "samples": 201,
+}
+
 STATE = (
     StateVector("M", tuple(M), "angular momentum about the contact point, body frame", "kg m^2/s"),
     StateVector("gamma", tuple(gamma), "unit vertical in the body frame", "1"),

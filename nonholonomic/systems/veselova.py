@@ -51,6 +51,13 @@ PARAMETERS = (
               minimum=0.0, strict=True),
 )
 POTENTIALS = catalog_of(ZERO, linear("gamma"), brun("gamma"), quadratic("gamma"))
+#: A job request for this kind (the catalog shows it; tests and benchmarks run it).
+EXAMPLE = {
+    "system": {"kind": KIND, "inertia": [2.0, 3.0, 4.5], "potential": {"kind": "zero"}},
+    "initial_state": {"omega": [0.5, -0.2, 0.15], "gamma": [0.0, 0.6, 0.8]},
+    "t_final": 1000.0, "samples": 201,
+}
+
 STATE = (
     StateVector("omega", tuple(omega), "angular velocity, body frame", "rad/s"),
     StateVector("gamma", tuple(gamma), "unit vector of the space-fixed axis, body frame", "1"),
