@@ -44,7 +44,7 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
 
 
 def warm_up() -> None:
-    """Compile every system's kernels and integrator and run its symbolic proofs (once per process)."""
+    """Compile every system's kernels and integrator and start its symbolic proofs (once per process)."""
     from nonholonomic.evidence.measure import symbolic_divergence_vanishes
     from nonholonomic.integration import MACHINE_EPSILON, heyoka_template
     from nonholonomic.kernels import numeric
@@ -55,4 +55,4 @@ def warm_up() -> None:
             system = get_system(kind, potential)
             heyoka_template(system, MACHINE_EPSILON)
             numeric(system).compile_all()
-            symbolic_divergence_vanishes(system)
+            symbolic_divergence_vanishes(system, budget_s=0)  # starts the proof; it finishes in its own thread

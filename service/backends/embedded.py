@@ -31,7 +31,17 @@ class EmbeddedBackend:
         self._ttl_s = settings.job_ttl_s
         self._threads = settings.embedded_workers
         self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="nonholonomic-job")
-        self._warm = self._pool.submit(warm_up) if settings.warm_up else None
+        self._warm = threading.Event()
+        if settings.warm_up:  # in its own thread, so the first jobs need not wait behind it
+            threading.Thread(target=self._warm_up, daemon=True, name="nonholonomic-warm-up").start()
+        else:
+            self._warm.set()
+
+    def _warm_up(self) -> None:
+        try:
+            warm_up()
+        finally:
+            self._warm.set()
 
     def submit(self, request: dict[str, Any]) -> JobRecord:
         job_id = str(uuid.uuid4())
@@ -89,7 +99,7 @@ class EmbeddedBackend:
         return record
 
     def health(self) -> dict[str, Any]:
-        warm = self._warm is None or self._warm.done()
+        warm = self._warm.is_set()
         return {"ok": True, "mode": self.mode, "broker": "none (embedded)",
                 "workers": {"threads": self._threads, "warm": warm}}
 
