@@ -10,8 +10,11 @@ from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
 
 
 def _parameter(par: Parameter) -> dict[str, Any]:
-    return {"name": par.name, "shape": par.shape, "components": [str(s) for s in par.symbols],
-            "meaning": par.meaning, "unit": par.unit, "admissible": par.admissible}
+    entry = {"name": par.name, "shape": par.shape, "components": [str(s) for s in par.symbols],
+             "meaning": par.meaning, "unit": par.unit, "admissible": par.admissible}
+    if par.transform_formula:
+        entry["components_are"] = f"entries 11, 12, 13, 22, 23, 33 of {par.transform_formula}, computed from {par.name}"
+    return entry
 
 
 def describe(kind: str) -> dict[str, Any]:

@@ -8,7 +8,9 @@ integrator, the integrals along a trajectory, the measure checks) is derived fro
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import sympy as sp
 
@@ -60,6 +62,10 @@ class Parameter:
     shape : ``"scalar"``, ``"vector"`` or ``"symmetric_matrix"`` (given as 3 numbers for a diagonal
         matrix or as a 3×3 nested list).
     positive_definite : for a symmetric matrix, whether it must be positive definite.
+    transform : for a symmetric matrix, a map applied to the request's (checked) matrix before its
+        entries become the symbols' values, when the equations are simpler in another matrix: the
+        quadric's ``B`` is requested, its inverse ``B⁻¹`` is what the equations use.
+    transform_formula : what ``transform`` computes, for the catalog (e.g. ``"B^-1"``).
     """
 
     name: str
@@ -70,6 +76,8 @@ class Parameter:
     strict: bool = False
     shape: str = ""
     positive_definite: bool = False
+    transform: Callable[[Any], Any] | None = None
+    transform_formula: str = ""
 
     def __post_init__(self) -> None:
         if not self.shape:
@@ -112,6 +120,9 @@ class Parameter:
                 raise ValueError("matrix is not symmetric")
             if self.positive_definite and not np.all(np.linalg.eigvalsh(array) > 0):
                 raise ValueError(f"matrix is not positive definite (eigenvalues {np.linalg.eigvalsh(array).tolist()})")
+            if self.transform is not None:
+                array = np.asarray(self.transform(array), dtype=float)
+                array = (array + array.T) / 2
             values = [float(array[i, j]) for i in range(3) for j in range(i, 3)]
         else:
             values = np.atleast_1d(array).tolist()

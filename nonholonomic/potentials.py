@@ -42,13 +42,14 @@ ZERO = Potential(kind="zero", formula="U = 0", parameters=(), build=lambda v: sp
                  scale=lambda v: sp.Integer(0))
 
 
-def linear(on: str = "gamma", also_on: str | None = None) -> Potential:
-    """``U = (a, v)`` on the vector ``on`` (plus ``(b, w)`` on ``also_on``)."""
-    a, par_a = _vector("a", f"field vector of the linear potential (a, {on})", "kg m^2/s^2")
+def linear(on: str = "gamma", also_on: str | None = None, unit: str = "kg m^2/s^2") -> Potential:
+    """``U = (a, v)`` on the vector ``on`` (plus ``(b, w)`` on ``also_on``); ``unit`` is a's (and b's)
+    unit: energy for a unit vector, force (kg m/s^2) for a position."""
+    a, par_a = _vector("a", f"field vector of the linear potential (a, {on})", unit)
     parameters = (par_a,)
     formula = f"U = (a, {on})"
     if also_on is not None:
-        b, par_b = _vector("b", f"field vector of the term (b, {also_on})", "kg m^2/s^2")
+        b, par_b = _vector("b", f"field vector of the term (b, {also_on})", unit)
         parameters += (par_b,)
         formula += f" + (b, {also_on})"
 
