@@ -9,9 +9,18 @@ from __future__ import annotations
 from types import ModuleType
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.systems import ball_on_quadric, chaplygin_ball, clebsch, neumann, veselova
+from nonholonomic.systems import (
+    ball_on_quadric,
+    chaplygin_ball,
+    chaplygin_ball_veselova,
+    clebsch,
+    neumann,
+    rubber_ball,
+    veselova,
+)
 
-SYSTEMS: dict[str, ModuleType] = {module.KIND: module for module in (chaplygin_ball, veselova, ball_on_quadric, neumann, clebsch)}
+SYSTEMS: dict[str, ModuleType] = {module.KIND: module for module in (
+    chaplygin_ball, veselova, chaplygin_ball_veselova, rubber_ball, ball_on_quadric, neumann, clebsch)}
 
 #: Potentials each kind accepts.
 SUPPORTED_POTENTIALS: dict[str, tuple[str, ...]] = {kind: tuple(m.POTENTIALS) for kind, m in SYSTEMS.items()}

@@ -113,7 +113,7 @@ def define(potential: str = "zero") -> MechanicalSystem:
         integrals=tuple(integrals),
         measure=InvariantMeasure(rho, "rho_omega = (gamma, I^-1 gamma)^(1/2)", "2504-4"),
         reduced_time=ReducedTime(1 / (rho * sp.sqrt(I1 * I2 * I3)), "d tau = dt / (rho_omega sqrt(det I))",
-                                 "2504-10-2", "s (kg m^2)^(-3/2)"),
+                                 "2504-10-2", "s (kg m^2)^(-1)"),
         potential_formula=pot.formula,
         constraints=(
             StateConstraint("gamma", norm_g, 1.0, "|gamma| = 1", "2504-3",
