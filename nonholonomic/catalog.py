@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from nonholonomic.definition import Parameter
-from nonholonomic.simulation import CHECKS
+from nonholonomic.simulation import available_checks
 from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
 
 
@@ -56,7 +56,7 @@ def describe(kind: str) -> dict[str, Any]:
             "formula": base.reduced_time.formula, "equation": base.reduced_time.equation,
             "unit": base.reduced_time.unit},
         "notes": list(base.notes),
-        "checks": list(CHECKS),
+        "checks": list(available_checks(base)),
         "example": getattr(module, "EXAMPLE", None),
         "time_unit": "s",
     }

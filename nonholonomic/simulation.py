@@ -12,9 +12,17 @@ from nonholonomic.evidence.integrals import IntegralEvidence, integral_evidence
 from nonholonomic.evidence.measure import CheckEvidence, measure_evidence
 from nonholonomic.integration import ProgressCallback, Trajectory, integrate
 from nonholonomic.kernels import numeric, parameter_vector, state_vector
+from nonholonomic.structure import bracket_evidence, euler_angle_evidence, structural_checks
 
-#: Evidence a simulation can compute.
-CHECKS = ("integrals", "measure")
+#: Evidence a simulation can compute (``bracket`` and ``euler_angles`` only for some kinds, see
+#: :func:`available_checks`); jobs default to :data:`DEFAULT_CHECKS`.
+CHECKS = ("integrals", "measure", "bracket", "euler_angles")
+DEFAULT_CHECKS = ("integrals", "measure")
+
+
+def available_checks(system: MechanicalSystem) -> tuple[str, ...]:
+    """The checks ``system`` supports."""
+    return DEFAULT_CHECKS + structural_checks(system.kind)
 
 
 @dataclass(frozen=True)
@@ -165,7 +173,7 @@ def simulate(
     t_final: float,
     samples: int,
     *,
-    checks: Sequence[str] = CHECKS,
+    checks: Sequence[str] = DEFAULT_CHECKS,
     project: bool = False,
     engine: str = "heyoka",
     tolerance: float | None = None,
@@ -177,7 +185,7 @@ def simulate(
     ----------
     parameters : named parameter groups (``{"inertia": [..], "D": .., "a": [..]}``).
     initial_state : named state vectors, or their alternatives (``omega`` for the ball's ``M``).
-    checks : a subset of :data:`CHECKS`.
+    checks : a subset of :func:`available_checks`.
     project : move the initial state onto the constraints first (reported in ``projections``)
         instead of refusing a state off them.
 
@@ -186,9 +194,9 @@ def simulate(
     ValueError
         If the initial state is invalid (see :func:`initial_state_problems`) or a check is unknown.
     """
-    unknown = sorted(set(checks) - set(CHECKS))
+    unknown = sorted(set(checks) - set(available_checks(system)))
     if unknown:
-        raise ValueError(f"unknown checks {unknown}; known: {CHECKS}")
+        raise ValueError(f"checks {unknown} are not available for {system.kind}; available: {available_checks(system)}")
     problems = initial_state_problems(system, parameters, initial_state, project)
     if problems:
         raise ValueError("; ".join(f"{p.field}: {p.reason}" for p in problems))
@@ -202,5 +210,9 @@ def simulate(
     derived = {name: fn(trajectory.states, p) for name, fn in kernels.derived.items()}
     integrals = integral_evidence(system, p, trajectory) if "integrals" in checks else []
     evidence = measure_evidence(system, p, trajectory.states) if "measure" in checks else []
+    if "bracket" in checks:
+        evidence += bracket_evidence(system, p, trajectory.states)
+    if "euler_angles" in checks:
+        evidence += euler_angle_evidence(system, p, trajectory.states)
     return SimulationResult(system, p, trajectory, derived, integrals, evidence,
                             parameter_warnings(system, parameters), projections)

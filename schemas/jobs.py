@@ -7,7 +7,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nonholonomic.integration import SCIPY_MIN_TOLERANCE
-from nonholonomic.simulation import CHECKS, FieldProblem, initial_state_problems
+from nonholonomic.simulation import DEFAULT_CHECKS, FieldProblem, available_checks, initial_state_problems
 from schemas.settings import get_settings
 from schemas.results import SimulationResultModel
 from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
@@ -47,8 +47,10 @@ class JobRequest(BaseModel):
                     "for the ball 'omega' may replace 'M'")
     t_final: FiniteFloat = Field(gt=0, description="end of the integration interval [0, t_final], in s")
     samples: int = Field(201, ge=2, description="number of equally spaced sample times, both ends included")
-    checks: list[Literal["integrals", "measure"]] = Field(
-        default_factory=lambda: list(CHECKS), description="evidence to compute")
+    checks: list[Literal["integrals", "measure", "bracket", "euler_angles"]] = Field(
+        default_factory=lambda: list(DEFAULT_CHECKS),
+        description="evidence to compute (default integrals and measure); 'bracket' (Hamiltonian form after the "
+                    "time substitution) and 'euler_angles' (local forms) where the catalog lists them")
     integrator: IntegratorOptions = Field(default_factory=IntegratorOptions)
     project_initial_state: bool = Field(
         False, description="move an initial state that is off a constraint (|gamma| = 1, (omega, gamma) = 0, "
@@ -72,8 +74,12 @@ class JobRequest(BaseModel):
 
     def problems(self) -> list[FieldProblem]:
         """Violations only the physics can see: state names, |γ| = 1, the engine's tolerance range."""
-        found = initial_state_problems(self.system.definition(), self.system.parameter_values(),  # type: ignore[attr-defined]
-                                       self.initial_state, self.project_initial_state)
+        system = self.system.definition()  # type: ignore[attr-defined]
+        found = [FieldProblem(f"checks[{i}]", f"{check!r} is not available for {system.kind}; "
+                                              f"available: {', '.join(available_checks(system))}")
+                 for i, check in enumerate(self.checks) if check not in available_checks(system)]
+        found += initial_state_problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
+                                        self.initial_state, self.project_initial_state)
         tol = self.integrator.tolerance
         if self.integrator.engine == "scipy" and tol is not None and tol < SCIPY_MIN_TOLERANCE:
             found.append(FieldProblem("integrator.tolerance",

@@ -23,7 +23,8 @@ def test_catalog_describes_the_ball(client):
     assert integrals["F"]["claimed_for_potentials"] == ["zero"] and integrals["F"]["equation"] == "2604-4"
     assert set(integrals["energy"]["claimed_for_potentials"]) == {"zero", "linear", "brun"}
     assert ball["measure"]["equation"] == "2604-3" and ball["reduced_time"]["equation"] == "2604-5"
-    assert ball["checks"] == ["integrals", "measure"]
+    assert ball["checks"] == ["integrals", "measure", "bracket", "euler_angles"]
+    assert next(s for s in systems if s["kind"] == "neumann")["checks"] == ["integrals", "measure"]
     assert ball["alternative_inputs"][0]["name"] == "omega"
 
 

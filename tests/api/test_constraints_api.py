@@ -52,3 +52,10 @@ def test_catalog_marks_the_quadric_parameter_as_B_inverse_in_the_equations(clien
     assert "B^-1" in B["components_are"]
     assert next(p for p in entry["potentials"] if p["kind"] == "linear")["parameters"][0]["unit"] == "kg m/s^2"
     assert entry["reduced_time"] is None
+
+
+def test_a_structural_check_the_kind_lacks_is_422(client):
+    r = client.post("/v1/jobs", json=example("neumann") | {"checks": ["integrals", "bracket"]})
+    assert r.status_code == 422
+    (error,) = r.json()["errors"]
+    assert error["field"] == "checks[1]" and "not available for neumann" in error["reason"]

@@ -1,0 +1,65 @@
+"""The structural evidence of a job: Hamiltonian form after the time substitution (``bracket``) and
+the Euler-angle local forms (``euler_angles``), for the kinds the paper gives them for.
+
+The heavy modules (:mod:`nonholonomic.hamiltonization`, :mod:`nonholonomic.local_forms`,
+:mod:`nonholonomic.evidence.brackets`) are imported when a job asks for these checks.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from nonholonomic.definition import MechanicalSystem
+from nonholonomic.evidence.measure import CheckEvidence
+from nonholonomic.kernels import VectorKernel, vectorize
+
+#: Kinds with a Hamiltonian form after a time substitution (paper: eq. 2504-10-2, 2604-5..7).
+HAMILTONIAN_KINDS = frozenset({"veselova", "chaplygin_ball"})
+#: Kinds with Euler-angle local forms (paper: eq. 2504-6..9, Theorem 2; eq. 001..007).
+LOCAL_FORM_KINDS = frozenset({"veselova", "chaplygin_ball"})
+#: States at most used for the pointwise structural checks (thinned evenly from the samples).
+MAX_POINTS = 50
+
+
+def structural_checks(kind: str) -> tuple[str, ...]:
+    """The structural checks available for ``kind``."""
+    return (("bracket",) if kind in HAMILTONIAN_KINDS else ()) + (("euler_angles",) if kind in LOCAL_FORM_KINDS else ())
+
+
+def _thin(states: np.ndarray) -> np.ndarray:
+    return states[np.unique(np.linspace(0, len(states) - 1, min(len(states), MAX_POINTS)).astype(int))]
+
+
+@lru_cache(maxsize=32)
+def _to_bracket_variables(system: MechanicalSystem) -> tuple[VectorKernel, tuple[int, ...]]:
+    from nonholonomic.hamiltonization import hamiltonian_form
+
+    form = hamiltonian_form(system)
+    if form is None:
+        raise ValueError(f"no Hamiltonian form is known for {system.kind}")
+    args = system.state_symbols + system.parameter_symbols
+    where = tuple(system.parameter_symbols.index(s) for s in form.bracket.parameters)
+    return vectorize(form.to_bracket_variables, args), where
+
+
+def bracket_evidence(system: MechanicalSystem, parameters: np.ndarray, states: np.ndarray) -> list[CheckEvidence]:
+    """The time-substituted flow against the Hamiltonian vector field (and its control in time t),
+    then the bracket itself (Jacobi identity, Casimirs, rank) at the mapped states."""
+    from nonholonomic.evidence.brackets import structure_evidence
+    from nonholonomic.hamiltonization import hamiltonian_form, hamiltonian_form_evidence
+
+    points = _thin(states)
+    items = hamiltonian_form_evidence(system, parameters, points)
+    to_bracket, where = _to_bracket_variables(system)
+    form = hamiltonian_form(system)
+    assert form is not None
+    return items + structure_evidence(form.bracket, to_bracket(points, parameters), parameters[list(where)])
+
+
+def euler_angle_evidence(system: MechanicalSystem, parameters: np.ndarray, states: np.ndarray) -> list[CheckEvidence]:
+    """The local forms in Euler angles against the vector forms at the job's states."""
+    from nonholonomic.local_forms import local_form_evidence
+
+    return local_form_evidence(system, parameters, _thin(states))
