@@ -1,0 +1,78 @@
+"""POST /v1/brackets/verify, POST /v1/hamiltonize and the structural job checks, through the API."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.api.conftest import job
+from tests.support import poll_job
+
+SO3 = {"variables": ["x", "y", "z"], "matrix": [["0", "z", "-y"], ["-z", "0", "x"], ["y", "-x", "0"]],
+       "casimirs": {"norm": "x**2 + y**2 + z**2", "wrong": "x**2"}}
+
+
+def test_so3_bracket_satisfies_jacobi_and_its_casimir(client):
+    r = client.post("/v1/brackets/verify", json=SO3)
+    assert r.status_code == 200, r.text
+    report = r.json()
+    assert report["jacobi"]["passed"] is True and report["dimension"] == 3
+    verdicts = {c["name"]: c["passed"] for c in report["casimirs"]}
+    assert verdicts == {"norm": True, "wrong": False}
+    assert report["rank"]["generic"] == 2
+
+
+def test_a_bracket_failing_jacobi_is_reported(client):
+    body = {**SO3, "matrix": [["0", "z", "-x*y"], ["-z", "0", "x"], ["x*y", "-x", "0"]], "casimirs": {}}
+    report = client.post("/v1/brackets/verify", json=body).json()
+    assert report["jacobi"]["passed"] is False
+
+
+@pytest.mark.parametrize("entry,reason", [("__import__('os').system('id')", ""), ("x.__class__", ""),
+                                          ("(lambda: 1)()", ""), ("9**9**9", ""), ("open('f')", ""), ("w + 1", "w")])
+def test_unsafe_or_unknown_expressions_are_422_with_field_and_position(client, entry, reason):
+    body = {**SO3, "matrix": [["0", entry, "-y"], ["-z", "0", "x"], ["y", "-x", "0"]]}
+    r = client.post("/v1/brackets/verify", json=body)
+    assert r.status_code == 422 and r.headers["content-type"] == "application/problem+json"
+    (error,) = r.json()["errors"]
+    assert error["field"] == "matrix[0][1]" and "at character" in error["reason"] and reason in error["reason"]
+
+
+def test_a_non_square_matrix_is_422(client):
+    r = client.post("/v1/brackets/verify", json={**SO3, "matrix": [["0", "z"], ["-z", "0"]]})
+    assert r.status_code == 422
+
+
+def test_hamiltonize_worked_examples_find_the_paper_multipliers(client):
+    examples = client.get("/v1/hamiltonize/examples").json()["examples"]
+    assert set(examples) == {"veselova", "chaplygin_ball"}
+    for name, example in examples.items():
+        r = client.post("/v1/hamiltonize", json=example)
+        assert r.status_code == 200, (name, r.text)
+        result = r.json()
+        assert result["measure_exists"] is True, (name, result)
+        assert result["verification"]["passed"] is True, (name, result["verification"])
+        assert result["reducing_multiplier"] and result["S_bar"] is not None
+
+
+def test_hamiltonize_refuses_unknown_names_and_non_quadratic_lagrangians(client):
+    base = {"lagrangian": "(q1dot**2 + q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
+            "a1": "0", "a2": "0", "b": "sin(q1)"}
+    r = client.post("/v1/hamiltonize", json={**base, "b": "sin(q3)"})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "b"
+    r = client.post("/v1/hamiltonize", json={**base, "lagrangian": "q1dot**4"})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "lagrangian"
+
+
+@pytest.mark.parametrize("kind,state", [("chaplygin_ball", None), ("veselova", None)])
+def test_bracket_and_euler_angle_checks_pass_on_a_job(client, kind, state):
+    from nonholonomic.systems import SYSTEMS
+
+    body = SYSTEMS[kind].EXAMPLE | {"t_final": 20.0, "samples": 21, "checks": ["integrals", "bracket", "euler_angles"]}
+    view = poll_job(client, client.post("/v1/jobs", json=body).headers["location"], timeout=300)
+    assert view["status"] == "succeeded", view["error"]
+    checks = view["result"]["checks"]
+    names = {c["name"] for c in checks}
+    assert {"hamiltonian_flow", "hamiltonian_flow_control", "jacobi_identity"} <= names
+    assert all(c["passed"] is not False for c in checks), [c for c in checks if c["passed"] is False]
+    flow = [c for c in checks if c["name"] == "hamiltonian_flow" and c["method"] == "pointwise"]
+    assert flow and flow[0]["residual"] <= 1e-10
