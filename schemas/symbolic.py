@@ -1,4 +1,4 @@
-"""Requests of the symbolic endpoints: ``POST /v1/brackets/verify``.
+"""Requests of the symbolic endpoints: ``POST /v1/brackets/verify`` and ``POST /v1/hamiltonize``.
 
 Every expression is a string parsed by :mod:`nonholonomic.expressions` (a whitelist over Python's
 AST; never eval): declared names, numbers, + − * / ** and named functions (sin, cos, sqrt ...).
@@ -39,3 +39,20 @@ class BracketVerifyRequest(BaseModel):
         if len(self.matrix) != n or any(len(row) != n for row in self.matrix):
             raise ValueError(f"matrix must be {n}x{n} (one row and column per variable)")
         return self
+
+
+class HamiltonizeRequest(BaseModel):
+    """A generalized Chaplygin system with two degrees of freedom (eq. 2704-7)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    lagrangian: Expression = Field(description="L(q1, q2, q1dot, q2dot), quadratic in the velocities")
+    coordinates: list[Name] = Field(min_length=2, max_length=2)
+    velocities: list[Name] = Field(min_length=2, max_length=2)
+    a1: Expression = Field(description="S = a1(q) q1dot + a2(q) q2dot + b(q) (eq. 2704-7)")
+    a2: Expression
+    b: Expression
+    potential: Expression | None = Field(None, description="U(q), if not already in the Lagrangian")
+    parameters: dict[Name, FiniteFloat] = Field(default_factory=dict)
+    symbols: list[Name] = Field(default_factory=list, description="names kept symbolic (e.g. I1, I2, I3)")
+    budget_s: float = Field(20.0, gt=0, le=MAX_BUDGET_S)

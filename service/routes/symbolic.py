@@ -1,4 +1,4 @@
-"""Symbolic work for user-given systems: ``POST /v1/brackets/verify``.
+"""Symbolic work for user-given systems: ``POST /v1/brackets/verify`` and ``POST /v1/hamiltonize``.
 
 User strings go through the safe parser only (:mod:`nonholonomic.expressions`). Every symbolic step
 runs under the request's time budget; parse errors are 422 problems naming the field and position.
@@ -6,6 +6,7 @@ runs under the request's time budget; parse errors are 422 problems naming the f
 
 from __future__ import annotations
 
+import ast
 from collections.abc import Sequence
 from typing import Any
 
@@ -13,7 +14,7 @@ import sympy as sp
 from fastapi import APIRouter
 
 from schemas.problems import FieldError
-from schemas.symbolic import BracketVerifyRequest
+from schemas.symbolic import BracketVerifyRequest, HamiltonizeRequest
 from service.errors import invalid_request
 
 router = APIRouter(tags=["symbolic"])
@@ -51,3 +52,44 @@ def verify_bracket(request: BracketVerifyRequest) -> dict[str, Any]:
     except ValueError as exc:
         raise invalid_request([FieldError(field="matrix", reason=str(exc))]) from None
     return {"variables": request.variables, "convention": "matrix[i][j] = {x_i, x_j}", **report}
+
+
+@router.post("/v1/hamiltonize", summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
+def hamiltonize(request: HamiltonizeRequest) -> dict[str, Any]:
+    from nonholonomic.reducing_multiplier import hamiltonize as reduce
+
+    names = request.coordinates + request.velocities + list(request.parameters) + request.symbols
+    symbols = _declare(names, "coordinates")
+    parsed = {field: _parse(getattr(request, field), symbols, field) for field in ("lagrangian", "a1", "a2", "b")}
+    potential = None if request.potential is None else _parse(request.potential, symbols, "potential")
+    try:
+        result = reduce(parsed["lagrangian"], tuple(symbols[q] for q in request.coordinates),  # type: ignore[arg-type]
+                        tuple(symbols[v] for v in request.velocities),  # type: ignore[arg-type]
+                        parsed["a1"], parsed["a2"], parsed["b"], potential,
+                        {symbols[k]: v for k, v in request.parameters.items()}, budget_s=request.budget_s)
+    except ValueError as exc:
+        raise invalid_request([FieldError(field="lagrangian", reason=str(exc))]) from None
+    return result.to_json()
+
+
+def _free_names(*texts: str) -> list[str]:
+    """Names used in expression strings (read with ast.parse, never evaluated)."""
+    from nonholonomic.expressions import ALLOWED_FUNCTIONS
+
+    found = {node.id for text in texts for node in ast.walk(ast.parse(text, mode="eval")) if isinstance(node, ast.Name)}
+    return sorted(found - set(ALLOWED_FUNCTIONS))
+
+
+@router.get("/v1/hamiltonize/examples", summary="Worked examples: Veselova and Chaplygin's ball in Euler angles")
+def hamiltonize_examples() -> dict[str, Any]:
+    from nonholonomic.local_forms import chaplygin_ball_generalized_chaplygin, veselova_generalized_chaplygin
+
+    examples = {}
+    for name, build in (("veselova", veselova_generalized_chaplygin), ("chaplygin_ball", chaplygin_ball_generalized_chaplygin)):
+        spec = build()
+        coordinates, velocities = spec["coordinates"].split(","), spec["velocities"].split(",")
+        fields = {k: spec[k] for k in ("lagrangian", "a1", "a2", "b")}
+        used = _free_names(*fields.values())
+        examples[name] = {**fields, "coordinates": coordinates, "velocities": velocities,
+                          "symbols": [n for n in used if n not in coordinates + velocities]}
+    return {"examples": examples}

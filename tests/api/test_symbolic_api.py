@@ -1,4 +1,4 @@
-"""POST /v1/brackets/verify and the structural job checks, through the API."""
+"""POST /v1/brackets/verify, POST /v1/hamiltonize and the structural job checks, through the API."""
 
 from __future__ import annotations
 
@@ -40,6 +40,27 @@ def test_unsafe_or_unknown_expressions_are_422_with_field_and_position(client, e
 def test_a_non_square_matrix_is_422(client):
     r = client.post("/v1/brackets/verify", json={**SO3, "matrix": [["0", "z"], ["-z", "0"]]})
     assert r.status_code == 422
+
+
+def test_hamiltonize_worked_examples_find_the_paper_multipliers(client):
+    examples = client.get("/v1/hamiltonize/examples").json()["examples"]
+    assert set(examples) == {"veselova", "chaplygin_ball"}
+    for name, example in examples.items():
+        r = client.post("/v1/hamiltonize", json=example)
+        assert r.status_code == 200, (name, r.text)
+        result = r.json()
+        assert result["measure_exists"] is True, (name, result)
+        assert result["verification"]["passed"] is True, (name, result["verification"])
+        assert result["reducing_multiplier"] and result["S_bar"] is not None
+
+
+def test_hamiltonize_refuses_unknown_names_and_non_quadratic_lagrangians(client):
+    base = {"lagrangian": "(q1dot**2 + q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
+            "a1": "0", "a2": "0", "b": "sin(q1)"}
+    r = client.post("/v1/hamiltonize", json={**base, "b": "sin(q3)"})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "b"
+    r = client.post("/v1/hamiltonize", json={**base, "lagrangian": "q1dot**4"})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "lagrangian"
 
 
 @pytest.mark.parametrize("kind,state", [("chaplygin_ball", None), ("veselova", None)])

@@ -1,0 +1,907 @@
+"""The reducing multiplier of a generalized Chaplygin system with two degrees of freedom (Theorem 1).
+
+Paper, section "Generalized Chaplygin systems", eq. (2704-7)–(2704-10) and Theorem 1. The system is
+
+    d/dt ∂L/∂q̇₁ − ∂L/∂q₁ = q̇₂ S,   d/dt ∂L/∂q̇₂ − ∂L/∂q₂ = −q̇₁ S,   S = a₁(q) q̇₁ + a₂(q) q̇₂ + b(q)   (2704-7)
+
+with L quadratic in the velocities, not necessarily homogeneous (Theorem 1):
+L = ½ q̇ᵀG(q)q̇ + (w(q), q̇) − V(q), det G ≠ 0. After the Legendre transform P = ∂L/∂q̇ = G q̇ + w
+(eq. 2704-10)
+
+    S = A₁ P₁ + A₂ P₂ + B,    (A₁, A₂) = G⁻¹a,    B = b − (a, G⁻¹w).
+
+The Liouville equation for a density ρ(q) dP₁dP₂dq₁dq₂ of (2704-10) gives (proof of Theorem 1)
+
+    ∂ ln ρ/∂q₁ = A₂,    ∂ ln ρ/∂q₂ = −A₁,
+
+so such a density exists (locally) iff the 1-form A₂ dq₁ − A₁ dq₂ is closed, i.e. iff the
+integrability condition ∂A₁/∂q₁ + ∂A₂/∂q₂ = 0 holds; ln ρ is then its line integral. ρ is found
+(up to a constant factor) by, in turn: an ansatz ρ = Π fⱼ^kⱼ exp(α·q) over the irreducible factors of
+A₁, A₂ and det G with rational kⱼ fitted at random points and then proved exactly; sympy's
+``integrate``; the line integral from a base point (left unevaluated if sympy finds no closed form). With the
+reducing multiplier N = ρ and dτ = N dt, eq. (2704-8) gives
+
+    S̄ = (N A₁ + ∂N/∂q₂) P₁ + (N A₂ − ∂N/∂q₁) P₂ + N B = N(q) B(q)
+
+(the paper's proof prints S̄ = B: ERRATA 6; and ∂L̄/∂q_q′ in eq. 2704-8 is ∂L̄/∂q₁′: ERRATA 14).
+In the new momenta p = ∂L̄/∂q′ = N P the equations are
+
+    dx/dτ = {x, H̄},    {q_i, p_j} = δ_ij,  {p₁, p₂} = S̄(q),  {q₁, q₂} = 0     (2704-9)
+
+with H̄(q, p) = H(q, p/N) the energy. That is Theorem 1's convention dx/dτ = {x, H̄} = P∇H̄; the
+e(3) sections (and :mod:`nonholonomic.brackets`, dx/dτ = {H, x} = −P∇H) use the opposite one, in
+which the same flow is ``−hamiltonian_vector_field(H̄)``, i.e. needs the bracket (2704-9) with the
+opposite sign. The verification computes both and says which holds.
+
+Monopoles (text after eq. 2704-9): :func:`monopole_charge` integrates S̄ dq₁∧dq₂ over a chart. In
+angle charts the momenta p may differ from smooth fibre coordinates of T*M by a potential W(q)
+singular at the poles; the smooth gyroscopic form is then that of p̃ = p − W (``shift``). For
+Chaplygin's ball in Euler angles, W = (0, cN cosθ) (from L = ρ_μM = cNγ + m(p_θ, p_φ − cN cosθ)),
+and the flux of the smooth form is −4πc/√det I (N = ρ_μ): non-zero for c ≠ 0, a monopole.
+
+Every symbolic step runs in a daemon thread under a time budget (the pattern of
+:mod:`nonholonomic.evidence.measure`); identities rational in sin qᵢ, cos qᵢ are decided exactly
+by the substitution t = tan(q/2) and an expanded numerator; numeric checks run at 40 digits.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from fractions import Fraction
+from functools import lru_cache
+from typing import Any
+
+import mpmath
+import numpy as np
+import sympy as sp
+from sympy.core.function import AppliedUndef
+
+from nonholonomic.brackets import PoissonStructure, generalized_chaplygin_bracket
+
+#: Where each item of the result comes from in the paper.
+EQUATIONS: dict[str, str] = {
+    "system": "2704-7: d/dt dL/dq1dot - dL/dq1 = q2dot S, d/dt dL/dq2dot - dL/dq2 = -q1dot S, "
+              "S = a1 q1dot + a2 q2dot + b",
+    "A1, A2, B": "2704-10: P = dL/dqdot, S = A1 P1 + A2 P2 + B; (A1, A2) = G^-1 (a1, a2), B = b - (a, G^-1 w) "
+                 "for L = qdot G qdot / 2 + (w, qdot) - V",
+    "integrability_condition": "proof of Theorem 1: (1/rho) drho/dq1 = A2, (1/rho) drho/dq2 = -A1; "
+                               "solvable (locally) iff dA1/dq1 + dA2/dq2 = 0",
+    "density": "proof of Theorem 1: Liouville equation for rho(q) dP1 dP2 dq1 dq2 of 2704-10",
+    "reducing_multiplier": "Theorem 1: N = rho, N dt = d tau",
+    "S_bar": "2704-8 with N = rho: S_bar = N B (ERRATA 6: the proof prints B; ERRATA 14: dL/dq_q' is dL/dq1')",
+    "hamiltonian": "Theorem 1: p = dL_bar/dq' = N P, H_bar = p q' - L_bar = H(q, p/N), the energy",
+    "bracket": "2704-9: {q_i, p_j} = delta_ij, {p1, p2} = S_bar(q), {q1, q2} = 0",
+    "convention": "Theorem 1: dq_i/dtau = {q_i, H_bar}, dp_i/dtau = {p_i, H_bar}",
+    "monopole": "text after 2704-9: a smooth closed 2-form S_bar dq1^dq2 on a compact M is exact iff its integral is 0 "
+                "(in angle charts the momenta may differ from smooth fibre coordinates by a singular W: see "
+                "monopole_charge(shift=...))",
+}
+
+#: Relative residual below which a 40-digit evaluation counts as zero.
+NUMERIC_ZERO = 1e-25
+#: Relative residual accepted for the pointwise flow check (40-digit evaluation).
+POINTWISE_TOLERANCE = 1e-20
+#: Digits of the mpmath evaluations.
+DIGITS = 40
+#: Base point of the line integral for ln ρ (inside (0, π/2)², where angle charts are regular).
+BASE_POINT = (sp.Rational(7, 10), sp.Rational(2, 5))
+
+
+# --------------------------------------------------------------------------------------------------
+# symbolic work under a time budget
+
+
+class _Task:
+    """A symbolic computation in a daemon thread, so a caller can stop waiting for it."""
+
+    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+        self.done = threading.Event()
+        self.value: Any = None
+        self.error = ""
+        self.seconds = 0.0
+        threading.Thread(target=self._run, args=(fn, args), daemon=True, name=f"reducing-{fn.__name__}").start()
+
+    def _run(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+        start = time.perf_counter()
+        try:
+            self.value = fn(*args)
+        except Exception as exc:  # sympy failures leave the step undecided, not the request failed
+            self.error = f"{type(exc).__name__}: {exc}"
+        self.seconds = time.perf_counter() - start
+        self.done.set()
+
+
+_tasks: dict[tuple[str, Any], _Task] = {}
+_tasks_lock = threading.Lock()
+
+
+def _bounded(fn: Callable[..., Any], args: tuple[Any, ...], timeout: float) -> tuple[str, Any, float]:
+    """Run ``fn(*args)`` for at most ``timeout`` s: ``("done", value, s)``, ``("error", message, s)``
+    or ``("timeout", None, timeout)``. Identical calls share one thread (cached per process), so a
+    repeated request waits for the running computation instead of starting another."""
+    key = (fn.__qualname__, args)
+    with _tasks_lock:
+        task = _tasks.get(key)
+        if task is None:
+            if len(_tasks) > 512:  # forget finished computations
+                for k in [k for k, t in _tasks.items() if t.done.is_set()]:
+                    del _tasks[k]
+            task = _tasks[key] = _Task(fn, args)
+    if not task.done.wait(max(timeout, 0.0)):
+        return "timeout", None, timeout
+    if task.error:
+        return "error", task.error, task.seconds
+    return "done", task.value, task.seconds
+
+
+def _weierstrass(expr: sp.Expr, q: Sequence[sp.Symbol]) -> sp.Expr | None:
+    """``expr`` with sin qᵢ = 2tᵢ/(1+tᵢ²), cos qᵢ = (1−tᵢ²)/(1+tᵢ²) (after ``expand_trig``); None if
+    a qᵢ survives inside a function (then the substitution does not make ``expr`` rational)."""
+    e = expr.replace(sp.tan, lambda x: sp.sin(x) / sp.cos(x)).replace(sp.cot, lambda x: sp.cos(x) / sp.sin(x))
+    e = e.replace(sp.sec, lambda x: 1 / sp.cos(x)).replace(sp.csc, lambda x: 1 / sp.sin(x))
+    e = sp.expand_trig(e)
+    subs = {}
+    for i, qi in enumerate(q):
+        t = sp.Dummy(f"t{i + 1}")
+        subs[sp.sin(qi)] = 2 * t / (1 + t**2)
+        subs[sp.cos(qi)] = (1 - t**2) / (1 + t**2)
+    e = e.xreplace(subs)
+    if any(f.has(*q) for f in e.atoms(sp.Function)):
+        return None
+    return e
+
+
+def _rational_trig_is_zero(expr: sp.Expr, q: tuple[sp.Symbol, ...]) -> bool | None:
+    """Exact decision of ``expr ≡ 0`` for ``expr`` rational in q, sin qᵢ, cos qᵢ and the parameters
+    (t = tan(q/2), common denominator, numerator expanded). None if ``expr`` is not of that form."""
+    e = _weierstrass(expr, q)
+    if e is None:
+        return None
+    numerator = sp.expand(sp.numer(sp.together(e)))
+    if numerator == 0:
+        return True
+    if any(isinstance(a, sp.Pow) and not a.exp.is_Integer for a in numerator.atoms(sp.Pow)):
+        return None  # algebraic parts: a non-zero expanded numerator proves nothing
+    return False
+
+
+def _symbols_of(expr: sp.Expr) -> sp.Expr:
+    """Derivatives and applied undefined functions replaced by fresh symbols (highest order first)."""
+    ders = sorted(expr.atoms(sp.Derivative), key=lambda d: -sum(c for _, c in d.variable_count))
+    expr = expr.xreplace({d: sp.Dummy() for d in ders})
+    return expr.xreplace({f: sp.Dummy() for f in expr.atoms(AppliedUndef)})
+
+
+def _det2(M: sp.Matrix) -> sp.Expr:
+    """Determinant of a 2×2 matrix, written out (sympy's ``det`` simplifies the entries)."""
+    return M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+
+
+def _adj2(M: sp.Matrix) -> sp.Matrix:
+    """Adjugate of a 2×2 matrix: ``adj(M) M = det(M) 1``."""
+    return sp.Matrix([[M[1, 1], -M[0, 1]], [-M[1, 0], M[0, 0]]])
+
+
+# --------------------------------------------------------------------------------------------------
+# numeric sampling at 40 digits
+
+
+@dataclass
+class _Sampler:
+    """Random phase points and parameter values for the numeric checks (seeded, reproducible).
+
+    Coordinates are drawn from (0.2, 1.35) (inside (0, π/2): away from sin q = 0 and cos q = 0 of
+    angle charts), velocities from (−1, 1); parameters without a given value from (1.1, 2.9)."""
+
+    given: dict[sp.Symbol, float]
+    free: tuple[sp.Symbol, ...]
+    seed: int = 2704
+    rng: np.random.Generator = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+        self.drawn = {s: float(v) for s, v in zip(self.free, self.rng.uniform(1.1, 2.9, len(self.free)))}
+
+    @property
+    def values(self) -> dict[sp.Symbol, float]:
+        return {**self.drawn, **self.given}
+
+    @property
+    def symbols(self) -> tuple[sp.Symbol, ...]:
+        return tuple(self.values)
+
+    def note(self) -> str:
+        if not self.drawn:
+            return ""
+        return "; parameters without a value drawn at random: " + ", ".join(
+            f"{s}={v:.4f}" for s, v in sorted(self.drawn.items(), key=lambda kv: str(kv[0])))
+
+    def coordinates(self, n: int) -> np.ndarray:
+        return self.rng.uniform(0.2, 1.35, (n, 2))
+
+    def velocities(self, n: int) -> np.ndarray:
+        return self.rng.uniform(-1.0, 1.0, (n, 2))
+
+    def function(self, exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> Callable[..., list[Any]]:
+        """``f(*args values) -> [mpf]`` at 40 digits, the parameters filled in (as exact inputs:
+        substituting floats into sympy would round every intermediate to 15 digits)."""
+        names = self.symbols
+        fn = sp.lambdify(list(args) + list(names), list(exprs), modules="mpmath")
+        values = [self.values[s] for s in names]
+
+        def evaluate(*x: float) -> list[Any]:
+            with mpmath.workdps(DIGITS):
+                return [mpmath.mpmathify(r) for r in fn(*[mpmath.mpf(v) for v in list(x) + values])]
+
+        return evaluate
+
+
+def _relative(total: Any, terms: Sequence[Any]) -> float:
+    scale = sum(abs(t) for t in terms)
+    return float(abs(total) / scale) if scale else float(abs(total))
+
+
+# --------------------------------------------------------------------------------------------------
+# the Lagrangian
+
+
+def _quadratic_lagrangian(L: sp.Expr, q: tuple[sp.Symbol, sp.Symbol], v: tuple[sp.Symbol, sp.Symbol],
+                          sampler: _Sampler) -> tuple[sp.Matrix, sp.Matrix, sp.Expr]:
+    """``(G, w, V)`` with ``L = ½ q̇ᵀG q̇ + (w, q̇) − V`` (Theorem 1: L quadratic in the velocities,
+    not necessarily homogeneous).
+
+    Raises
+    ------
+    ValueError
+        If L is not a polynomial of degree ≤ 2 in the velocities (third derivatives non-zero at a
+        random point), or if det G vanishes at every sampled point.
+    """
+    if not L.is_polynomial(*v):
+        raise ValueError(f"the Lagrangian must be a polynomial of degree <= 2 in the velocities "
+                         f"{', '.join(map(str, v))} (Theorem 1: L quadratic in the velocities)")
+    third = [sp.diff(L, v[i], v[j], v[k]) for i in range(2) for j in range(i, 2) for k in range(j, 2)]
+    fn = sampler.function(third, list(q) + list(v))
+    for qq, vv in zip(sampler.coordinates(3), sampler.velocities(3)):
+        if any(abs(x) > 1e-30 for x in fn(*qq, *vv)):
+            raise ValueError("the Lagrangian has degree > 2 in the velocities; Theorem 1 needs a quadratic "
+                             "function of the velocities (not necessarily homogeneous)")
+    G = sp.Matrix(2, 2, lambda i, j: sp.diff(L, v[i], v[j]))
+    w = sp.Matrix([sp.diff(L, vi).subs({v[0]: 0, v[1]: 0}) for vi in v])
+    V = -L.subs({v[0]: 0, v[1]: 0})
+    det = sampler.function([_det2(G)] + list(G), list(q) + list(v))
+    values = [det(*qq, *vv) for qq, vv in zip(sampler.coordinates(4), sampler.velocities(4))]
+    if all(abs(x[0]) <= 1e-30 * sum(abs(g) for g in x[1:]) ** 2 for x in values):
+        raise ValueError("the kinetic matrix d2L/dqdot_i dqdot_j is singular (det = 0 at every sampled point); "
+                         "Theorem 1 needs det != 0")
+    return G, w, V
+
+
+def _check_coefficients(named: Mapping[str, sp.Expr], v: tuple[sp.Symbol, sp.Symbol]) -> None:
+    for name, expr in named.items():
+        if expr.has(*v):
+            raise ValueError(f"{name} must depend on the coordinates only (eq. 2704-7), not on the velocities")
+
+
+# --------------------------------------------------------------------------------------------------
+# Theorem 1 for arbitrary data (the symbolic half of the verification)
+
+
+@lru_cache(maxsize=4)
+def prove_theorem_1(s_bar: str = "N*B", convention: str = "theorem_1") -> tuple[bool, str]:
+    """Theorem 1 for *arbitrary* functions: G (symmetric), w, V, a₁, a₂, b of (q₁, q₂) and N with
+    ∂N/∂q₁ = N A₂, ∂N/∂q₂ = −N A₁ (the density's equations).
+
+    The τ-flow of eq. (2704-7), written in (q, p = N ∂L/∂q̇), minus the Hamiltonian field of
+    H̄ = H(q, p/N) with the bracket (2704-9): derivatives of N are replaced by the density's
+    equations, every other function and derivative by a symbol, and the numerators over a common
+    denominator are expanded. ``s_bar`` is "N*B" (ERRATA 6) or "B" (the printed proof);
+    ``convention`` is "theorem_1" (dx/dτ = {x, H̄}) or "brackets_py" (dx/dτ = {H̄, x}).
+
+    Returns
+    -------
+    (bool, str)
+        Whether all four components vanish identically, and which do not.
+    """
+    q = sp.symbols("q1 q2", real=True)
+    v = sp.symbols("v1 v2", real=True)
+    F = {name: sp.Function(name)(*q) for name in ("g11", "g12", "g22", "w1", "w2", "V", "a1", "a2", "b")}
+    G = sp.Matrix([[F["g11"], F["g12"]], [F["g12"], F["g22"]]])
+    L = (sp.Matrix(v).T * G * sp.Matrix(v))[0, 0] / 2 + F["w1"] * v[0] + F["w2"] * v[1] - F["V"]
+    a = sp.Matrix([F["a1"], F["a2"]])
+    w = sp.Matrix([F["w1"], F["w2"]])
+    Ginv = _adj2(G) / _det2(G)
+    A1, A2 = Ginv * a
+    B = F["b"] - (a.T * Ginv * w)[0, 0]
+    S = F["a1"] * v[0] + F["a2"] * v[1] + F["b"]
+    P = (sp.Dummy("P1"), sp.Dummy("P2"))
+    p = sp.symbols("p1 p2", real=True)
+    H = ((sp.Matrix(P) - w).T * Ginv * (sp.Matrix(P) - w))[0, 0] / 2 + F["V"]
+    Nf = sp.Function("N")(*q)
+    n = sp.Dummy("n")
+    H_bar = H.xreplace({P[0]: p[0] / Nf, P[1]: p[1] / Nf})
+    flow, theorem_1, brackets_py = _flow_fields(L, q, v, S, Nf, Nf * B if s_bar == "N*B" else B, H_bar, p)
+    field_ = theorem_1 if convention == "theorem_1" else brackets_py
+    rules = {sp.Derivative(Nf, q[0]): n * A2, sp.Derivative(Nf, q[1]): -n * A1}
+    failing = []
+    for i, (x, y) in enumerate(zip(flow, field_)):
+        d = _symbols_of((x - y).doit().xreplace(rules).xreplace({Nf: n}))
+        if sp.expand(sp.numer(sp.together(d))) != 0:
+            failing.append(("dq1", "dq2", "dp1", "dp2")[i] + "/dtau")
+    what = f"S_bar = {s_bar}, dx/dtau = " + ("{x, H_bar}" if convention == "theorem_1" else "{H_bar, x}")
+    if failing:
+        return False, f"{what}: not identically equal to the tau-flow in {', '.join(failing)}"
+    return True, (f"{what}: the tau-flow of eq. 2704-7 in (q, p = N dL/dqdot) equals the Hamiltonian field for "
+                  "arbitrary G, w, V, a1, a2, b and every N with dN/dq1 = N A2, dN/dq2 = -N A1 "
+                  "(numerators expanded to 0)")
+
+
+def _flow_fields(L: sp.Expr, q: Sequence[sp.Symbol], v: Sequence[sp.Symbol], S: sp.Expr, N: sp.Expr,
+                 S_bar: sp.Expr, H_bar: sp.Expr, p: Sequence[sp.Symbol]) -> tuple[list[sp.Expr], ...]:
+    """The τ-flow of eq. (2704-7) in (q, p = N ∂L/∂q̇) and the two Hamiltonian fields of H̄ with the
+    bracket (2704-9), all as functions of (q, q̇): ``(flow, theorem_1, brackets_py)`` where
+    theorem_1 is dx/dτ = {x, H̄} = P∇H̄ and brackets_py is ``hamiltonian_vector_field(H̄)`` = −P∇H̄."""
+    G = sp.Matrix(2, 2, lambda i, j: sp.diff(L, v[i], v[j]))
+    # eq. (2704-7) solved for q̈ from L itself (not through the Legendre transform)
+    rhs = (sp.Matrix([v[1] * S, -v[0] * S]) + sp.Matrix([sp.diff(L, qi) for qi in q])
+           - sp.Matrix(2, 2, lambda i, j: sp.diff(L, v[i], q[j])) * sp.Matrix(v))
+    qdd = _adj2(G) * rhs / _det2(G)
+    p_of = [N * sp.diff(L, vi) for vi in v]
+    flow = [v[0] / N, v[1] / N] + [
+        (sum(sp.diff(pi, qj) * vj for qj, vj in zip(q, v)) + sum(sp.diff(pi, vj) * a for vj, a in zip(v, qdd))) / N
+        for pi in p_of]
+    bracket = generalized_chaplygin_bracket(S_bar, q, p)
+    at = {p[0]: p_of[0], p[1]: p_of[1]}
+    brackets_py = [f.xreplace(at) for f in bracket.hamiltonian_vector_field(H_bar)]
+    theorem_1 = [-f for f in brackets_py]
+    return flow, theorem_1, brackets_py
+
+
+# --------------------------------------------------------------------------------------------------
+# the density
+
+
+def _reduce_cos_squares(expr: sp.Expr, q: Sequence[sp.Symbol]) -> sp.Expr:
+    """``cos(qᵢ)^k → cos(qᵢ)^(k mod 2) (1 − sin²qᵢ)^(k div 2)``, expanded: a normal form modulo
+    sin² + cos² = 1, so that factoring does not split sin² into (1 − cos)(1 + cos)."""
+    def reduce(e: sp.Expr) -> sp.Expr:
+        for qi in q:
+            e = e.replace(lambda x, qi=qi: x.is_Pow and x.base == sp.cos(qi) and x.exp.is_Integer and x.exp >= 2,
+                          lambda x, qi=qi: sp.cos(qi) ** (x.exp % 2) * (1 - sp.sin(qi) ** 2) ** (x.exp // 2))
+        return e
+
+    return sp.expand(reduce(sp.expand(expr)))
+
+
+def _candidate_factors(exprs: Sequence[sp.Expr], q: tuple[sp.Symbol, sp.Symbol]) -> list[sp.Expr]:
+    """Irreducible factors (polynomials in sin qᵢ, cos qᵢ, q and the parameters) of the numerators
+    and denominators of ``exprs``, plus sin qᵢ, cos qᵢ, qᵢ: the basis of the ansatz ρ = Π fⱼ^kⱼ."""
+    out: list[sp.Expr] = []
+
+    def add(f: sp.Expr) -> None:
+        _, f = f.as_independent(*q, as_Add=False)
+        if f.has(*q) and f not in out and sp.expand(-f) not in out:
+            out.append(f)
+
+    for e in exprs:
+        for part in sp.fraction(sp.together(e)):
+            if part.has(*q):
+                for f, _ in sp.factor_list(_reduce_cos_squares(part, q))[1]:
+                    add(f)
+    for qi in q:
+        if any(e.has(sp.sin(qi), sp.cos(qi), sp.tan(qi)) for e in exprs):
+            add(sp.sin(qi))
+            add(sp.cos(qi))
+        add(qi)
+    return out
+
+
+def _density_ansatz(A1: sp.Expr, A2: sp.Expr, extra: tuple[sp.Expr, ...], q: tuple[sp.Symbol, sp.Symbol],
+                    values: tuple[tuple[sp.Symbol, float], ...]) -> tuple[sp.Expr, str] | None:
+    """ρ = Π fⱼ^kⱼ exp(α₁q₁ + α₂q₂) with rational kⱼ fitted by least squares at random points to
+    ∂ ln ρ/∂q₁ = A₂, ∂ ln ρ/∂q₂ = −A₁, then proved exactly. None if no such ρ is found."""
+    import scipy.linalg
+
+    factors = _candidate_factors((A1, A2) + extra, q)
+    names = [s for s, _ in values]
+    par = [x for _, x in values]
+    targets = [A2, -A1]
+    rows = [[sp.diff(f, qi) / f for f in factors] for qi in q]
+    fn = sp.lambdify(list(q) + names, rows[0] + rows[1] + targets, modules="numpy")
+    nf = len(factors)
+    M, y = [], []
+    for q1, q2 in np.random.default_rng(7).uniform(0.2, 1.35, (3 * (nf + 2) + 6, 2)):
+        vals = np.asarray(fn(q1, q2, *par), dtype=float)
+        M += [list(vals[:nf]) + [1.0, 0.0], list(vals[nf:2 * nf]) + [0.0, 1.0]]
+        y += [vals[2 * nf], vals[2 * nf + 1]]
+    M_arr, y_arr = np.array(M), np.array(y)
+    if not (np.all(np.isfinite(M_arr)) and np.all(np.isfinite(y_arr))):
+        return None
+    # independent columns (column-pivoted QR), then the unique least-squares solution on them
+    _, R, piv = scipy.linalg.qr(M_arr, pivoting=True, mode="economic")
+    diag = np.abs(np.diag(R))
+    keep = sorted(piv[: int(np.sum(diag > 1e-9 * diag[0]))]) if diag.size and diag[0] > 0 else []
+    k = np.zeros(nf + 2)
+    if keep:
+        k[keep] = np.linalg.lstsq(M_arr[:, keep], y_arr, rcond=None)[0]
+    if np.linalg.norm(M_arr @ k - y_arr) > 1e-7 * max(np.linalg.norm(y_arr), 1e-300):
+        return None
+    exps = []
+    for kj in k[:nf]:
+        frac = Fraction(float(kj)).limit_denominator(24)
+        if abs(float(frac) - kj) > 1e-6:
+            return None
+        exps.append(sp.Rational(frac.numerator, frac.denominator))
+    used = [(e, f) for e, f in zip(exps, factors) if e != 0]
+    # α: the rest of the 1-form must be constant; take it exactly at the base point
+    alpha = []
+    for i, (qi, target) in enumerate(zip(q, targets)):
+        if abs(k[nf + i]) < 1e-9 * max(1.0, float(np.max(np.abs(y_arr)))):
+            alpha.append(sp.Integer(0))
+        else:
+            rest = target - sum((e * sp.diff(f, qi) / f for e, f in used), sp.Integer(0))
+            alpha.append(sp.cancel(rest.xreplace(dict(zip(q, BASE_POINT)))))
+    log_rho = sum((e * sp.log(f) for e, f in used), sp.Integer(0)) + alpha[0] * q[0] + alpha[1] * q[1]
+    for qi, target in zip(q, targets):  # an exact proof that d ln ρ = A₂ dq₁ − A₁ dq₂
+        if _rational_trig_is_zero(sp.diff(log_rho, qi) - target, q) is not True:
+            return None
+    # each factor's sign chosen positive at the base point (ρ is defined up to a constant factor)
+    at_base = sp.lambdify(list(q) + names, [f for _, f in used], modules="mpmath")(*BASE_POINT, *par)
+    pieces = [((-f if float(s) < 0 else f) ** e) for (e, f), s in zip(used, at_base)]
+    rho = sp.Mul(*pieces) * sp.exp(alpha[0] * q[0] + alpha[1] * q[1])
+    return rho, ("ansatz rho = prod f_j^k_j exp(alpha.q) over the irreducible factors of A1, A2 and det G; exponents "
+                 "fitted at random points, rationalized, and d ln rho = A2 dq1 - A1 dq2 proved exactly")
+
+
+def _density_by_integration(A1: sp.Expr, A2: sp.Expr,
+                            q: tuple[sp.Symbol, sp.Symbol]) -> tuple[sp.Expr, str, sp.Expr] | None:
+    """ln ρ = ∫A₂ dq₁ + g(q₂), g′ = −A₁ − ∂/∂q₂ ∫A₂ dq₁ (sympy ``integrate``); None if sympy
+    leaves an integral or g′ depends on q₁."""
+    F = sp.integrate(sp.cancel(A2), q[0])
+    if F.has(sp.Integral):
+        return None
+    h = sp.cancel(-A1 - sp.diff(F, q[1]))
+    if h.has(q[0]):
+        h = sp.simplify(h)
+        if h.has(q[0]):
+            return None
+    G = sp.integrate(h, q[1])
+    if G.has(sp.Integral):
+        return None
+    return (sp.exp(F + G), "ln rho = integral of A2 dq1 + g(q2), g' = -A1 - d/dq2 integral of A2 dq1 (sympy integrate)",
+            F + G)
+
+
+def _density_line_integral(A1: sp.Expr, A2: sp.Expr, q: tuple[sp.Symbol, sp.Symbol]) -> tuple[sp.Expr, str, sp.Expr]:
+    """ln ρ(q) = ∫₀¹ [A₂ (q₁ − q₁⁰) − A₁ (q₂ − q₂⁰)](q⁰ + s(q − q⁰)) ds, the straight segment from
+    the base point q⁰ (valid on a star-shaped domain around it), in closed form if sympy finds one."""
+    s = sp.Dummy("s")
+    on_segment = {qi: q0 + s * (qi - q0) for qi, q0 in zip(q, BASE_POINT)}
+    integrand = A2.xreplace(on_segment) * (q[0] - BASE_POINT[0]) - A1.xreplace(on_segment) * (q[1] - BASE_POINT[1])
+    integral = sp.integrate(integrand, (s, 0, 1))
+    how = "left as an integral (no closed form found)" if integral.has(sp.Integral) else "evaluated by sympy"
+    return sp.exp(integral), (f"ln rho = line integral of A2 dq1 - A1 dq2 along the segment from q0 = "
+                              f"({BASE_POINT[0]}, {BASE_POINT[1]}), {how}"), integral
+
+
+def _density_equations_hold(log_rho: sp.Expr, A1: sp.Expr, A2: sp.Expr, q: tuple[sp.Symbol, sp.Symbol]) -> bool | None:
+    """Whether ∂ ln ρ/∂q₁ = A₂ and ∂ ln ρ/∂q₂ = −A₁ identically (None: undecided)."""
+    verdicts = []
+    for qi, target in zip(q, (A2, -A1)):
+        e = sp.diff(log_rho, qi) - target
+        verdict = _rational_trig_is_zero(e, q)
+        if verdict is None and not e.has(sp.Integral):
+            verdict = True if sp.simplify(e) == 0 else None
+        verdicts.append(verdict)
+    return False if False in verdicts else (True if all(verdicts) else None)
+
+
+# --------------------------------------------------------------------------------------------------
+# the result
+
+
+def _string(x: Any) -> Any:
+    if isinstance(x, sp.Basic):
+        return sp.sstr(x)
+    if isinstance(x, (float, int, np.floating, np.integer)) and not isinstance(x, bool):
+        return float(x)
+    if isinstance(x, dict):
+        return {k: _string(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_string(v) for v in x]
+    return x
+
+
+@dataclass
+class ReducingMultiplierResult:
+    """Theorem 1 for one system: S in the momenta (eq. 2704-10), whether a density ρ(q) exists
+    (None: undecided in the budget), N = ρ, S̄ = N B (ERRATA 6), H̄(q, p), the bracket (2704-9), the
+    verification of the flow, the monopole data, and the paper's equation for each item.
+
+    ``momenta`` are the symbols p₁, p₂ of ``hamiltonian`` and ``bracket``; ``convention`` the one in
+    which the verification holds."""
+
+    A1: sp.Expr
+    A2: sp.Expr
+    B: sp.Expr
+    measure_exists: bool | None
+    integrability_condition: str
+    reason: str
+    density: sp.Expr | None
+    reducing_multiplier: sp.Expr | None
+    S_bar: sp.Expr | None
+    hamiltonian: sp.Expr | None
+    bracket: PoissonStructure | None
+    verification: dict[str, Any]
+    monopole: dict[str, Any] | None
+    equations: dict[str, str]
+    momenta: tuple[sp.Symbol, ...] = ()
+    convention: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        """All sympy expressions as strings (``sp.sstr``), numbers as floats."""
+        bracket = None
+        if self.bracket is not None:
+            b = self.bracket
+            bracket = {"name": b.name, "equation": b.equation, "variables": [str(x) for x in b.variables],
+                       "matrix": [[sp.sstr(x) for x in b.matrix.row(i)] for i in range(b.matrix.rows)],
+                       "formula": b.formula, "convention": self.convention}
+        return {
+            "A1": _string(self.A1), "A2": _string(self.A2), "B": _string(self.B),
+            "measure_exists": self.measure_exists,
+            "integrability_condition": self.integrability_condition,
+            "reason": self.reason,
+            "density": _string(self.density), "reducing_multiplier": _string(self.reducing_multiplier),
+            "S_bar": _string(self.S_bar), "hamiltonian": _string(self.hamiltonian),
+            "momenta": [str(p) for p in self.momenta],
+            "bracket": bracket,
+            "verification": _string(self.verification),
+            "monopole": _string(self.monopole),
+            "equations": dict(self.equations),
+            "convention": self.convention,
+        }
+
+
+def _momentum_symbols(q: tuple[sp.Symbol, sp.Symbol], taken: set[sp.Basic]) -> tuple[sp.Symbol, sp.Symbol]:
+    names = {str(s) for s in taken}
+    out = []
+    for qi in q:
+        name = f"p_{qi}"
+        while name in names:
+            name += "_"
+        out.append(sp.Symbol(name, real=True))
+    return out[0], out[1]
+
+
+def _tidy(expr: sp.Expr, q: Sequence[sp.Symbol]) -> sp.Expr:
+    """A cheap normal form: one fraction, cos² qᵢ reduced to 1 − sin² qᵢ in numerator and
+    denominator, common factors cancelled, then both factored."""
+    n, d = sp.fraction(sp.together(expr))
+    n, d = sp.fraction(sp.cancel(_reduce_cos_squares(n, q) / _reduce_cos_squares(d, q)))
+    return sp.factor(n) / sp.factor(d)
+
+
+def _tidy_bounded(expr: sp.Expr, q: Sequence[sp.Symbol], timeout: float) -> sp.Expr:
+    """:func:`_tidy` if it finishes within ``timeout`` s, else ``expr`` over a common denominator."""
+    status, value, _ = _bounded(_tidy, (expr, tuple(q)), timeout)
+    return value if status == "done" else sp.together(expr)
+
+
+def _pointwise_flow(L: sp.Expr, q: tuple[sp.Symbol, sp.Symbol], v: tuple[sp.Symbol, sp.Symbol], S: sp.Expr,
+                    N: sp.Expr, S_bar: sp.Expr, H_bar: sp.Expr, p: tuple[sp.Symbol, sp.Symbol],
+                    sampler: _Sampler, points: int = 6) -> tuple[float, float]:
+    """Max relative residual |flow − X|₁ / (|flow|₁ + |X|₁) of the τ-flow against {x, H̄}
+    (Theorem 1) and against ``hamiltonian_vector_field(H̄)`` (brackets.py) at random (q, q̇), with
+    the actual N (differentiated symbolically), 40 digits.
+
+    Evaluated in stages (q̈ from eq. 2704-7; p = N ∂L/∂q̇ and its derivatives; then the field of H̄
+    at (q, p)) so that no expression is substituted into another: the same quantities as
+    :func:`_flow_fields`, without the expression swell."""
+    G = sp.Matrix(2, 2, lambda i, j: sp.diff(L, v[i], v[j]))
+    rhs = (sp.Matrix([v[1] * S, -v[0] * S]) + sp.Matrix([sp.diff(L, qi) for qi in q])
+           - sp.Matrix(2, 2, lambda i, j: sp.diff(L, v[i], q[j])) * sp.Matrix(v))
+    p_of = [N * sp.diff(L, vi) for vi in v]
+    stage1 = list(G) + list(rhs) + [N] + p_of + [sp.diff(pi, x) for pi in p_of for x in (*q, *v)]
+    f1 = sampler.function(stage1, list(q) + list(v))
+    field_py = generalized_chaplygin_bracket(S_bar, q, p).hamiltonian_vector_field(H_bar)
+    f2 = sampler.function(list(field_py), list(q) + list(p))
+    worst_t1 = worst_py = 0.0
+    with mpmath.workdps(DIGITS):
+        for qq, vv in zip(sampler.coordinates(points), sampler.velocities(points)):
+            vals = f1(*qq, *vv)
+            Gm = mpmath.matrix([[vals[0], vals[1]], [vals[2], vals[3]]])
+            qdd = mpmath.lu_solve(Gm, mpmath.matrix([vals[4], vals[5]]))
+            n, pp, dp = vals[6], vals[7:9], vals[9:]
+            flow = [mpmath.mpf(vv[0]) / n, mpmath.mpf(vv[1]) / n] + [
+                (dp[4 * i] * vv[0] + dp[4 * i + 1] * vv[1] + dp[4 * i + 2] * qdd[0] + dp[4 * i + 3] * qdd[1]) / n
+                for i in range(2)]
+            py = f2(*qq, *pp)
+            t1 = [-x for x in py]
+            scale = sum(abs(x) for x in flow) + sum(abs(x) for x in t1)
+            worst_t1 = max(worst_t1, float(sum(abs(a - b) for a, b in zip(flow, t1)) / scale))
+            worst_py = max(worst_py, float(sum(abs(a - b) for a, b in zip(flow, py)) / scale))
+    return worst_t1, worst_py
+
+
+def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], velocities: tuple[sp.Symbol, sp.Symbol],
+                a1: sp.Expr, a2: sp.Expr, b: sp.Expr, potential: sp.Expr | None = None,
+                parameters: Mapping[sp.Symbol, float] | None = None, budget_s: float = 20.0,
+                domain: tuple[tuple[float, float], tuple[float, float]] | None = None) -> ReducingMultiplierResult:
+    """Theorem 1 for the generalized Chaplygin system (2704-7) with Lagrangian ``L − U``.
+
+    Parameters
+    ----------
+    lagrangian : L(q, q̇), a polynomial of degree ≤ 2 in the velocities (Theorem 1: quadratic, not
+        necessarily homogeneous) with det ∂²L/∂q̇∂q̇ ≠ 0.
+    coordinates, velocities : (q₁, q₂) and (q̇₁, q̇₂).
+    a1, a2, b : S = a₁(q) q̇₁ + a₂(q) q̇₂ + b(q) (eq. 2704-7).
+    potential : U(q), subtracted from L (None: already in L).
+    parameters : values of constants for the numeric checks (the symbolic work keeps them as symbols);
+        constants without a value get random values in (1.1, 2.9), reported in the details.
+    budget_s : seconds for the symbolic steps together (density proof, closedness proof, integration).
+    domain : optional chart ((q₁ min, max), (q₂ min, max)); if given, ``monopole`` is
+        :func:`monopole_charge` of S̄ over it.
+
+    Returns
+    -------
+    ReducingMultiplierResult
+        A₁, A₂, B (eq. 2704-10); ``measure_exists`` from the integrability condition
+        ∂A₁/∂q₁ + ∂A₂/∂q₂ = 0 (proof of Theorem 1: False with the failing residual, None if
+        undecided); ρ with ∂ ln ρ/∂q₁ = A₂, ∂ ln ρ/∂q₂ = −A₁ (up to a constant factor); N = ρ;
+        S̄ = N B (ERRATA 6); H̄(q, p) = H(q, p/N); the bracket (2704-9); the verification that
+        the τ-flow is dx/dτ = {x, H̄} (Theorem 1's convention).
+
+    Raises
+    ------
+    ValueError
+        If L is not quadratic in the velocities, its kinetic matrix is singular, or a₁, a₂, b, U
+        depend on the velocities.
+    """
+    start = time.perf_counter()
+
+    def remaining() -> float:
+        return max(budget_s - (time.perf_counter() - start), 0.0)
+
+    q = (coordinates[0], coordinates[1])
+    v = (velocities[0], velocities[1])
+    a1, a2, b = (sp.expand_trig(sp.sympify(x)) for x in (a1, a2, b))
+    U = sp.Integer(0) if potential is None else sp.expand_trig(sp.sympify(potential))
+    _check_coefficients({"a1": a1, "a2": a2, "b": b, "potential": U}, v)
+    L = sp.expand_trig(sp.sympify(lagrangian)) - U
+    taken = L.free_symbols | a1.free_symbols | a2.free_symbols | b.free_symbols | set(q) | set(v)
+    constants = tuple(sorted(taken - set(q) - set(v), key=str))
+    given = {sp.sympify(k): float(val) for k, val in (parameters or {}).items()}
+    sampler = _Sampler(given, tuple(s for s in constants if s not in given))
+    G, w, V = _quadratic_lagrangian(L, q, v, sampler)
+
+    # Legendre transform (eq. 2704-10): q̇ = G⁻¹(P − w), S = (a, G⁻¹(P − w)) + b
+    tidy_s = max(min(remaining() / 8, 5.0), 0.2)
+    G = G.applyfunc(lambda e: _tidy_bounded(e, q, tidy_s))
+    w = w.applyfunc(lambda e: _tidy_bounded(e, q, tidy_s))
+    V = _tidy_bounded(V, q, tidy_s)
+    # L in the normal form ½ q̇ᵀGq̇ + (w, q̇) − V (equal to L; smaller to differentiate)
+    L_normal = (sp.Matrix(v).T * G * sp.Matrix(v))[0, 0] / 2 + (w.T * sp.Matrix(v))[0, 0] - V
+    detG = _tidy_bounded(_det2(G), q, tidy_s)
+    Ginv = _adj2(G) / detG
+    avec = sp.Matrix([a1, a2])
+    A = Ginv * avec
+    A1, A2 = _tidy_bounded(A[0], q, tidy_s), _tidy_bounded(A[1], q, tidy_s)
+    B = _tidy_bounded(b - (avec.T * Ginv * w)[0, 0], q, tidy_s)
+    S = a1 * v[0] + a2 * v[1] + b
+    p = _momentum_symbols(q, taken)
+    P = (sp.Dummy("P1"), sp.Dummy("P2"))
+    H_of_P = ((sp.Matrix(P) - w).T * Ginv * (sp.Matrix(P) - w))[0, 0] / 2 + V
+
+    # integrability condition: d(A2 dq1 − A1 dq2) = 0
+    d1, d2 = sp.diff(A1, q[0]), sp.diff(A2, q[1])
+    condition = d1 + d2
+    n1, n2 = str(q[0]), str(q[1])
+    condition_text = (f"dA1/d{n1} + dA2/d{n2} = 0 (the 1-form A2 d{n1} - A1 d{n2} = d ln rho must be closed; "
+                      "proof of Theorem 1)")
+    fn = sampler.function([d1, d2], q)
+    worst, worst_at = 0.0, (0.0, 0.0)
+    for qq in sampler.coordinates(8):
+        t1, t2 = fn(*qq)
+        r = _relative(t1 + t2, (t1, t2))
+        if np.isfinite(r) and r >= worst:
+            worst, worst_at = r, tuple(qq)
+    base: dict[str, Any] = dict(A1=A1, A2=A2, B=B, momenta=p, convention="dx/dtau = {x, H_bar} (Theorem 1)")
+
+    if worst > NUMERIC_ZERO:
+        shown = _tidy_bounded(condition, q, max(min(remaining(), 5.0), 0.2))
+        reason = (f"the integrability condition dA1/d{n1} + dA2/d{n2} = 0 fails: it equals {sp.sstr(shown)}; relative "
+                  f"value |dA1/d{n1} + dA2/d{n2}| / (|dA1/d{n1}| + |dA2/d{n2}|) = {worst:.3g} at "
+                  f"{n1}={worst_at[0]:.4f}, "
+                  f"{n2}={worst_at[1]:.4f}{sampler.note()} (40 digits); so no invariant measure rho(q) dP1 dP2 dq1 dq2 "
+                  "exists and Theorem 1 gives no reducing multiplier N(q)")
+        return ReducingMultiplierResult(
+            measure_exists=False, integrability_condition=f"{condition_text}; simplified value: {sp.sstr(shown)}",
+            reason=reason, density=None, reducing_multiplier=None, S_bar=None, hamiltonian=None, bracket=None,
+            verification={"method": "pointwise", "residual": worst, "passed": None,
+                          "detail": "no multiplier to verify; residual is that of the integrability condition"},
+            monopole=None, equations=dict(EQUATIONS), **base)
+
+    # the density: an exact ansatz first (its proof also proves closedness), then sympy integration
+    rho, how, exact_density = None, "", False
+    status, found, secs = _bounded(_density_ansatz, (A1, A2, (detG,), q, tuple(sampler.values.items())), remaining())
+    if status == "done" and found is not None:
+        (rho, how), exact_density = found, True
+        how += f" ({secs:.2f} s)"
+    closed_proven = exact_density
+    if exact_density:
+        closed_detail = "implied by the exact density (d ln rho = A2 dq1 - A1 dq2 proved)"
+    else:
+        status, closed, secs = _bounded(_rational_trig_is_zero, (sp.together(condition), q), remaining())
+        closed_proven = status == "done" and closed is True
+        closed_detail = (f"proved identically zero ({secs:.2f} s)" if closed_proven else
+                         f"zero at 8 random points to {worst:.1e} (40 digits); symbolic proof: "
+                         + {"timeout": "budget exhausted", "error": f"{closed}"}.get(status, "undecided"))
+        if status == "done" and closed is False:  # numerically tiny but not identically zero
+            return ReducingMultiplierResult(
+                measure_exists=False, integrability_condition=f"{condition_text}; not identically zero",
+                reason=f"the integrability condition dA1/d{n1} + dA2/d{n2} = 0 fails (its numerator is not "
+                       f"identically zero) although it is below {worst:.1e} at the sampled points",
+                density=None, reducing_multiplier=None, S_bar=None, hamiltonian=None, bracket=None,
+                verification={"method": "symbolic", "residual": worst, "passed": None, "detail": "no multiplier"},
+                monopole=None, equations=dict(EQUATIONS), **base)
+        for attempt in (_density_by_integration, _density_line_integral):
+            if remaining() <= 0:
+                break
+            status, found, secs = _bounded(attempt, (A1, A2, q), remaining())
+            if status != "done" or found is None:
+                continue
+            status, holds, _ = _bounded(_density_equations_hold, (found[2], A1, A2, q), remaining())
+            if status == "done" and holds is False:  # sympy's antiderivative is wrong: do not use it
+                continue
+            rho, how = found[0], found[1] + f" ({secs:.2f} s)"
+            exact_density = status == "done" and holds is True
+            how += "; d ln rho = A2 dq1 - A1 dq2 " + ("proved exactly" if exact_density else "not proved symbolically")
+            break
+    integrability = f"{condition_text}; simplified value: 0 ({closed_detail})"
+    equations = {**EQUATIONS, "density_method": how}
+    measure_exists: bool | None = True if closed_proven else None
+    reason = "" if closed_proven else "undecided within the budget: " + closed_detail
+    if rho is None:
+        reason += "; no density found within the budget (ansatz, sympy integrate, line integral)"
+        return ReducingMultiplierResult(
+            measure_exists=measure_exists, integrability_condition=integrability, reason=reason.lstrip("; "),
+            density=None, reducing_multiplier=None, S_bar=None, hamiltonian=None, bracket=None,
+            verification={"method": "pointwise", "residual": worst, "passed": None, "detail": reason.lstrip("; ")},
+            monopole=None, equations=equations, **base)
+
+    N = rho
+    S_bar = N * B
+    H_bar = H_of_P.xreplace({P[0]: p[0] / N, P[1]: p[1] / N})
+    bracket = generalized_chaplygin_bracket(S_bar, q, p, parameters=constants)
+
+    # verification: pointwise with the actual N; symbolic = Theorem 1 for arbitrary data + exact density
+    res_t1, res_py = _pointwise_flow(L_normal, q, v, S, N, S_bar, H_bar, p, sampler)
+    passed_pw = bool(np.isfinite(res_t1) and res_t1 <= POINTWISE_TOLERANCE)
+    theorem, theorem_detail = prove_theorem_1()
+    symbolic = theorem and closed_proven and exact_density
+    verification = {
+        "method": "symbolic" if symbolic and passed_pw else "pointwise",
+        "residual": res_t1,
+        "passed": passed_pw and theorem,
+        "detail": (f"convention of Theorem 1, dx/dtau = {{x, H_bar}} = P grad H_bar, P the matrix of eq. 2704-9: max "
+                   f"relative residual {res_t1:.2e} at 6 random (q, qdot) (40 digits, actual N differentiated)"
+                   f"{sampler.note()}; brackets.py's hamiltonian_vector_field(H_bar) = -P grad H_bar "
+                   f"(dx/dtau = {{H, x}}) gives {res_py:.2e}: in that convention the same flow needs the bracket with "
+                   f"the opposite sign ({{q_i, p_j}} = -delta_ij, {{p1, p2}} = -S_bar). Symbolic: {theorem_detail}; "
+                   f"this rho: {how}; closedness: {closed_detail}"),
+        "pointwise_residual_brackets_py_convention": res_py,
+        "symbolic": symbolic if closed_proven else None,
+    }
+    if domain is not None:
+        monopole = monopole_charge(S_bar, q, domain, sampler.values)
+        monopole["detail"] += sampler.note()
+    elif B == 0:
+        monopole = {"integral": 0.0, "exact": True, "detail": "S_bar = 0: no gyroscopic 2-form"}
+    else:
+        monopole = {"integral": None, "exact": None,
+                    "detail": "give the chart's domain (hamiltonize(..., domain=...) or monopole_charge) to integrate "
+                              "the gyroscopic 2-form S_bar dq1^dq2"}
+    return ReducingMultiplierResult(
+        measure_exists=measure_exists, integrability_condition=integrability, reason=reason,
+        density=rho, reducing_multiplier=N, S_bar=S_bar, hamiltonian=H_bar, bracket=bracket,
+        verification=verification, monopole=monopole, equations=equations, **base)
+
+
+# --------------------------------------------------------------------------------------------------
+# monopoles
+
+
+def _symbolic_area_integral(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
+                            domain: tuple[tuple[sp.Expr, sp.Expr], tuple[sp.Expr, sp.Expr]]) -> sp.Expr | None:
+    (a, b), (c, d) = domain
+    value = sp.integrate(S_bar, (q[1], c, d), (q[0], a, b))
+    return None if value.has(sp.Integral) else value
+
+
+def monopole_charge(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
+                    domain: tuple[tuple[float, float], tuple[float, float]],
+                    parameters: Mapping[sp.Symbol, float] | None = None, symbolic_budget_s: float = 3.0,
+                    shift: tuple[sp.Expr, sp.Expr] | None = None) -> dict[str, Any]:
+    """∫ S̄ dq₁∧dq₂ over the chart ``domain`` (text after eq. 2704-9).
+
+    If the chart covers a compact surface up to a set of measure zero (Euler angles θ ∈ (0, π),
+    φ ∈ (0, 2π) on S²) and S̄ dq₁∧dq₂ is a smooth 2-form there, it is exact iff its integral is 0;
+    if not, the generalized potential W (dW = Ω) has singularities (monopoles) and no global
+    canonical form exists.
+
+    Smoothness is the catch in angle charts: if the momenta p are not smooth fibre coordinates of
+    T*M (e.g. after a Routh reduction they differ from them by a potential W(q) singular at the
+    poles, a Dirac string), the smooth gyroscopic form belongs to p̃ = p − W, for which eq. (2704-9)
+    gives {p̃₁, p̃₂} = S̄ + ∂W₂/∂q₁ − ∂W₁/∂q₂. Pass ``shift=(W₁, W₂)`` to integrate that form instead;
+    the chart integral of S̄ alone is then reported as ``"integral_S_bar"``.
+
+    Parameters
+    ----------
+    S_bar : S̄(q) of the bracket (2704-9).
+    q : (q₁, q₂).
+    domain : ((q₁ min, q₁ max), (q₂ min, q₂ max)); multiples of π are recognised for sympy.
+    parameters : values of every other symbol.
+    symbolic_budget_s : seconds for sympy's attempt at the exact integral (≤ 0: no attempt).
+    shift : (W₁, W₂) with p̃ = p − W smooth fibre coordinates, or None.
+
+    Returns
+    -------
+    dict
+        ``{"integral": float, "exact": bool, "detail": str}`` plus ``"absolute_integral"`` (of
+        |form|, the scale of "zero"), ``"error_estimate"``, ``"form"`` (the integrand), and
+        ``"symbolic"`` if sympy found the integral.
+
+    Raises
+    ------
+    ValueError
+        If a symbol other than q has no value.
+    """
+    from scipy.integrate import dblquad
+
+    par = {sp.sympify(k): float(val) for k, val in (parameters or {}).items()}
+    S_bar = sp.sympify(S_bar)
+    form = S_bar
+    if shift is not None:
+        W1, W2 = (sp.sympify(x) for x in shift)
+        form = S_bar + sp.diff(W2, q[0]) - sp.diff(W1, q[1])
+    missing = form.free_symbols - set(q) - set(par)
+    if missing:
+        raise ValueError(f"S_bar has symbols without a value: {', '.join(sorted(map(str, missing)))}")
+    (a, b), (c, d) = [(float(lo), float(hi)) for lo, hi in domain]
+
+    def integrate(expr: sp.Expr) -> tuple[float, float, float]:
+        names = sorted(expr.free_symbols - set(q), key=str)
+        f = sp.lambdify(list(q) + names, expr, modules="numpy")
+        values = [par[s] for s in names]
+        # dblquad integrates func(y, x) with x outer: outer q₁, inner q₂
+        value, err = dblquad(lambda y, x: float(f(x, y, *values)), a, b, c, d, epsabs=1e-13, epsrel=1e-11)
+        absolute, _ = dblquad(lambda y, x: abs(float(f(x, y, *values))), a, b, c, d, epsabs=1e-13, epsrel=1e-9)
+        return value, absolute, err
+
+    value, absolute, err = integrate(form)
+    exact = bool(abs(value) <= 1e-9 * absolute + 1e-14)
+    what = "S_bar" if shift is None else "S_bar + dW2/dq1 - dW1/dq2"
+    out: dict[str, Any] = {
+        "integral": float(value), "exact": exact, "absolute_integral": float(absolute), "error_estimate": float(err),
+        "form": sp.sstr(form),
+        "detail": (f"integral of ({what}) d{q[0]} d{q[1]} over {q[0]} in ({a:g}, {b:g}), {q[1]} in ({c:g}, {d:g}) "
+                   f"by scipy dblquad = {value:.12g} (its absolute value integrates to {absolute:.6g}); if the chart "
+                   "covers a compact surface (e.g. Euler angles on S^2) and the form is smooth there, the closed "
+                   "2-form is exact iff the integral is 0: "
+                   + ("exact, a global generalized potential W exists" if exact else
+                      "not exact: W has singularities (monopoles), no global canonical Hamiltonian form")),
+    }
+    if shift is not None:
+        out["integral_S_bar"] = float(integrate(S_bar)[0])
+        out["detail"] += (f"; the chart integral of S_bar alone is {out['integral_S_bar']:.12g} (the momenta p differ "
+                          "from smooth fibre coordinates by W)")
+    if symbolic_budget_s <= 0:
+        return out
+    exact_domain = tuple(tuple(sp.nsimplify(x, [sp.pi]) for x in pair) for pair in domain)
+    status, sym, _ = _bounded(_symbolic_area_integral, (form, q, exact_domain), symbolic_budget_s)
+    if status == "done" and sym is not None:
+        out["symbolic"] = sp.sstr(sym)
+        out["detail"] += f"; sympy: {sp.sstr(sym)}"
+    return out
