@@ -42,14 +42,12 @@ s = (Γ, IΓ)^(1/2) (and ρ_ω = 1/s at from(y), checked). Ball: no restriction 
 holds on all of R⁶; J_i = c_i² leaves s = (1 − D (γ, J⁻¹γ))^(1/2). Every component's numerator,
 a polynomial A(s²) + s B(s²), is reduced with s² = radicand in a sparse polynomial ring over QQ;
 A = B = 0 proves it. Otherwise one exact evaluation (50 digits) at a random rational point with a
-non-zero value disproves it; if neither, the verdict is None. The proof runs in a daemon thread
-bounded by ``budget_s`` and is cached per process.
+non-zero value disproves it; if neither, the verdict is None. The proof runs under
+``budget_s`` and is cached per process (:mod:`nonholonomic.bounded`).
 """
 
 from __future__ import annotations
 
-import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -57,6 +55,7 @@ from functools import lru_cache
 import numpy as np
 import sympy as sp
 
+from nonholonomic import bounded
 from nonholonomic.brackets import PoissonStructure, chaplygin_ball_bracket, e3
 from nonholonomic.definition import MechanicalSystem, dot
 from nonholonomic.evidence.measure import CheckEvidence
@@ -447,43 +446,13 @@ def _disprove(residual: sp.Expr, leaf: _Leaf, tries: int = 50) -> tuple[bool | N
     return None, ""
 
 
-class _Proof:
-    """A symbolic proof in a daemon thread, so a caller can stop waiting (cf. evidence.measure)."""
-
-    def __init__(self, form: HamiltonianForm, system: MechanicalSystem) -> None:
-        self.done = threading.Event()
-        self.result: tuple[bool | None, str] = (None, "not finished")
-        self.seconds = 0.0
-        threading.Thread(target=self._run, args=(form, system), daemon=True, name="hamiltonian-proof").start()
-
-    def _run(self, form: HamiltonianForm, system: MechanicalSystem) -> None:
-        start = time.perf_counter()
-        try:
-            self.result = _prove_flow(form, system)
-        except Exception as exc:  # sympy failures leave the claim undecided
-            self.result = (None, f"sympy could not decide: {type(exc).__name__}: {exc}")
-        self.seconds = time.perf_counter() - start
-        self.done.set()
-
-
-_proofs: dict[tuple[HamiltonianForm, MechanicalSystem], _Proof] = {}
-_proofs_lock = threading.Lock()
-
-
 def symbolic_flow_identity(form: HamiltonianForm, system: MechanicalSystem,
                            budget_s: float = SYMBOLIC_BUDGET_S) -> tuple[bool | None, str]:
     """Whether the τ-pushforward equals ``{H, ·}`` identically on the leaf; None if undecided in budget.
 
-    The proof keeps running after a timeout; later calls get its result (cached per process).
+    The proof keeps running after a timeout; later calls get its result (:mod:`nonholonomic.bounded`).
     """
-    with _proofs_lock:
-        proof = _proofs.get((form, system))
-        if proof is None:
-            proof = _proofs[(form, system)] = _Proof(form, system)
-    if not proof.done.wait(budget_s):
-        return None, f"symbolic proof did not finish within {budget_s:g} s"
-    proven, detail = proof.result
-    return proven, f"{detail} ({proof.seconds:.2f} s, cached per process)"
+    return bounded.prove(("flow", form, system), _prove_flow, (form, system), budget_s)
 
 
 # --- evidence -------------------------------------------------------------------------------------

@@ -399,6 +399,13 @@ _BALL_EXAMPLE = {
 }
 
 
+#: Where the ball's gyroscopic form lives (text after eq. 2704-9): Euler angles cover S², and the
+#: momenta of the Routh form differ from smooth fibre coordinates of T*S² by W = (0, c N cos θ), so
+#: L = ρ_μ M = c N γ + m(p_θ, p_φ − c N cos θ), m the angular momentum map in spherical coordinates
+#: (checked in tests/unit/test_reducing_multiplier.py). N is the reducing multiplier found.
+BALL_MONOPOLE_CHART = {"domain": [["0", "pi"], ["0", "2*pi"]], "shift": ["0", "c*N*cos(theta)"]}
+
+
 def veselova_generalized_chaplygin() -> dict[str, str]:
     """Theorem 1 inputs for the Veselova system in (θ, φ) (U = 0).
 

@@ -46,7 +46,6 @@ by the substitution t = tan(q/2) and an expanded numerator; numeric checks run a
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -59,6 +58,7 @@ import numpy as np
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
+from nonholonomic import bounded
 from nonholonomic.brackets import PoissonStructure, generalized_chaplygin_bracket
 
 #: Where each item of the result comes from in the paper.
@@ -94,47 +94,14 @@ BASE_POINT = (sp.Rational(7, 10), sp.Rational(2, 5))
 # symbolic work under a time budget
 
 
-class _Task:
-    """A symbolic computation in a daemon thread, so a caller can stop waiting for it."""
-
-    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
-        self.done = threading.Event()
-        self.value: Any = None
-        self.error = ""
-        self.seconds = 0.0
-        threading.Thread(target=self._run, args=(fn, args), daemon=True, name=f"reducing-{fn.__name__}").start()
-
-    def _run(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
-        start = time.perf_counter()
-        try:
-            self.value = fn(*args)
-        except Exception as exc:  # sympy failures leave the step undecided, not the request failed
-            self.error = f"{type(exc).__name__}: {exc}"
-        self.seconds = time.perf_counter() - start
-        self.done.set()
-
-
-_tasks: dict[tuple[str, Any], _Task] = {}
-_tasks_lock = threading.Lock()
-
-
 def _bounded(fn: Callable[..., Any], args: tuple[Any, ...], timeout: float) -> tuple[str, Any, float]:
     """Run ``fn(*args)`` for at most ``timeout`` s: ``("done", value, s)``, ``("error", message, s)``
-    or ``("timeout", None, timeout)``. Identical calls share one thread (cached per process), so a
-    repeated request waits for the running computation instead of starting another."""
-    key = (fn.__qualname__, args)
-    with _tasks_lock:
-        task = _tasks.get(key)
-        if task is None:
-            if len(_tasks) > 512:  # forget finished computations
-                for k in [k for k, t in _tasks.items() if t.done.is_set()]:
-                    del _tasks[k]
-            task = _tasks[key] = _Task(fn, args)
-    if not task.done.wait(max(timeout, 0.0)):
-        return "timeout", None, timeout
-    if task.error:
-        return "error", task.error, task.seconds
-    return "done", task.value, task.seconds
+    or ``("timeout" | "busy", message, s)``. Identical calls share one computation, cached per process
+    (:mod:`nonholonomic.bounded`)."""
+    outcome = bounded.run(("reducing_multiplier", fn.__qualname__, args), fn, args, timeout)
+    if outcome.status == "done":
+        return "done", outcome.value, outcome.seconds
+    return ("error" if outcome.status == "error" else "timeout"), outcome.message, outcome.seconds
 
 
 def _weierstrass(expr: sp.Expr, q: Sequence[sp.Symbol]) -> sp.Expr | None:
@@ -628,7 +595,9 @@ def _pointwise_flow(L: sp.Expr, q: tuple[sp.Symbol, sp.Symbol], v: tuple[sp.Symb
 def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], velocities: tuple[sp.Symbol, sp.Symbol],
                 a1: sp.Expr, a2: sp.Expr, b: sp.Expr, potential: sp.Expr | None = None,
                 parameters: Mapping[sp.Symbol, float] | None = None, budget_s: float = 20.0,
-                domain: tuple[tuple[float, float], tuple[float, float]] | None = None) -> ReducingMultiplierResult:
+                domain: tuple[tuple[float, float], tuple[float, float]] | None = None,
+                shift: tuple[sp.Expr, sp.Expr] | None = None,
+                multiplier_symbol: sp.Symbol | None = None) -> ReducingMultiplierResult:
     """Theorem 1 for the generalized Chaplygin system (2704-7) with Lagrangian ``L − U``.
 
     Parameters
@@ -643,6 +612,10 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
     budget_s : seconds for the symbolic steps together (density proof, closedness proof, integration).
     domain : optional chart ((q₁ min, max), (q₂ min, max)); if given, ``monopole`` is
         :func:`monopole_charge` of S̄ over it.
+    shift : optional (W₁, W₂) for :func:`monopole_charge`: p̃ = p − W are smooth fibre coordinates
+        (needs ``domain``). May contain ``multiplier_symbol``, which stands for the N found here
+        (e.g. the ball: W = (0, c N cos θ)).
+    multiplier_symbol : the symbol standing for N in ``shift``.
 
     Returns
     -------
@@ -795,7 +768,10 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
         "symbolic": symbolic if closed_proven else None,
     }
     if domain is not None:
-        monopole = monopole_charge(S_bar, q, domain, sampler.values)
+        W = None if shift is None else tuple(
+            sp.sympify(w).xreplace({multiplier_symbol: N} if multiplier_symbol is not None else {}) for w in shift)
+        monopole = monopole_charge(S_bar, q, domain, sampler.values, shift=W,  # type: ignore[arg-type]
+                                   symbolic_budget_s=min(3.0, remaining()))
         monopole["detail"] += sampler.note()
     elif B == 0:
         monopole = {"integral": 0.0, "exact": True, "detail": "S_bar = 0: no gyroscopic 2-form"}

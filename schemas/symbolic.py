@@ -14,6 +14,7 @@ from schemas.systems import FiniteFloat
 
 Expression = Annotated[str, Field(min_length=1, max_length=2000, description="expression, e.g. 'x*y - z'")]
 Name = Annotated[str, Field(min_length=1, max_length=32)]
+Bounds = Annotated[list[Expression], Field(min_length=2, max_length=2, description="[min, max]")]
 #: Upper bound on the seconds a request may grant to symbolic work.
 MAX_BUDGET_S = 30.0
 
@@ -41,6 +42,23 @@ class BracketVerifyRequest(BaseModel):
         return self
 
 
+class MonopoleRequest(BaseModel):
+    """Where to integrate the gyroscopic 2-form S̄ dq₁∧dq₂ (text after eq. 2704-9)."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{
+        "domain": [["0", "pi"], ["0", "2*pi"]], "shift": ["0", "c*N*cos(theta)"]}]})
+
+    domain: list[Bounds] = Field(
+        min_length=2, max_length=2,
+        description="chart [[q1 min, q1 max], [q2 min, q2 max]] as constant expressions, e.g. [['0', 'pi'], "
+                    "['0', '2*pi']] for Euler angles covering S^2")
+    shift: list[Expression] | None = Field(
+        None, min_length=2, max_length=2,
+        description="W = [W1, W2] with p~ = p - W smooth fibre coordinates (e.g. after a Routh reduction); "
+                    "expressions in the coordinates and constants, and N, the reducing multiplier found. "
+                    "The integrated form is then S_bar + dW2/dq1 - dW1/dq2")
+
+
 class HamiltonizeRequest(BaseModel):
     """A generalized Chaplygin system with two degrees of freedom (eq. 2704-7)."""
 
@@ -56,3 +74,5 @@ class HamiltonizeRequest(BaseModel):
     parameters: dict[Name, FiniteFloat] = Field(default_factory=dict)
     symbols: list[Name] = Field(default_factory=list, description="names kept symbolic (e.g. I1, I2, I3)")
     budget_s: float = Field(20.0, gt=0, le=MAX_BUDGET_S)
+    monopole: MonopoleRequest | None = Field(
+        None, description="integrate S_bar dq1^dq2 over a chart: exact (integral 0) or a monopole")

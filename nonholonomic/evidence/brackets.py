@@ -13,8 +13,8 @@ Symbolic checks keep the parameters as symbols: an expression is put over a comm
 Chaplygin's ball bracket eq. (2604-6) and its Casimir γ² are rational; the Casimir (L, γ)/ρ_μ contains
 ``sqrt(det I_Q)`` and still reduces this way). A non-rational numerator that does not expand to 0 is
 evaluated at random rational points with 50 digits: a clearly non-zero value disproves the identity,
-otherwise the check stays undecided. Each proof runs in a daemon thread under a time budget and is
-cached per process (a later call gets the result of a proof that outlived its budget).
+otherwise the check stays undecided. Each proof runs under a time budget and is cached per
+process (:mod:`nonholonomic.bounded`; a later call gets the result of a proof that outlived its budget).
 
 Pointwise checks evaluate the individual terms (exact symbolic derivatives, compiled with
 :func:`nonholonomic.kernels.vectorize` over ``variables + parameters``) and report
@@ -29,16 +29,16 @@ but (L, γ)/ρ_μ is no longer a Casimir; with J_i J_j → I_i I_j Jacobi fails.
 from __future__ import annotations
 
 import itertools
-import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Hashable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache
 
 import numpy as np
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
+from nonholonomic import bounded
 from nonholonomic.brackets import PoissonStructure
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.kernels import vectorize
@@ -56,8 +56,6 @@ _CONFIRM_THRESHOLD = 1e-12
 _CONFIRM_POINTS = 6
 #: Largest user bracket accepted (the Jacobiators grow like n³ and each has 3n terms).
 MAX_USER_DIMENSION = 16
-#: Finished proofs kept in the per-process cache.
-_CACHE_SIZE = 256
 
 
 # --------------------------------------------------------------------------------------------
@@ -129,60 +127,6 @@ def _vanishes(expr: sp.Expr) -> tuple[bool | None, str]:
     return verdict, f"numerator ({terms} terms) {detail}"
 
 
-# --------------------------------------------------------------------------------------------
-# Proofs in daemon threads, cached per process
-# --------------------------------------------------------------------------------------------
-
-class _Proof:
-    """A symbolic proof running in a daemon thread, so a caller can stop waiting for it.
-
-    The task returns ``(verdict, detail)`` or ``(verdict, detail, payload)``.
-    """
-
-    def __init__(self, task: Callable[[], tuple]) -> None:
-        self.done = threading.Event()
-        self.result: tuple[bool | None, str] = (None, "not finished")
-        self.payload: object = None
-        self.seconds = 0.0
-        threading.Thread(target=self._run, args=(task,), daemon=True, name="bracket-proof").start()
-
-    def _run(self, task: Callable[[], tuple]) -> None:
-        start = time.perf_counter()
-        try:
-            out = task()
-            self.result, self.payload = (out[0], out[1]), (out[2] if len(out) > 2 else None)
-        except Exception as exc:  # a sympy failure leaves the claim unresolved, not the job failed
-            self.result = (None, f"sympy could not decide: {type(exc).__name__}: {exc}")
-        self.seconds = time.perf_counter() - start
-        self.done.set()
-
-    def wait(self, budget_s: float) -> tuple[bool | None, str]:
-        if not self.done.wait(max(budget_s, 0.0)):
-            return None, f"symbolic proof did not finish within {max(budget_s, 0.0):.3g} s (it continues in the background)"
-        verdict, detail = self.result
-        return verdict, f"{detail} ({self.seconds:.2f} s, cached per process)"
-
-
-_proofs: dict[Hashable, _Proof] = {}
-_proofs_lock = threading.Lock()
-
-
-def _start_proof(key: Hashable, task: Callable[[], tuple]) -> _Proof:
-    """The cached proof for ``key``, started now if there is none."""
-    with _proofs_lock:
-        proof = _proofs.get(key)
-        if proof is None:
-            if len(_proofs) >= _CACHE_SIZE:  # forget finished proofs, oldest first
-                for old in [k for k, p in _proofs.items() if p.done.is_set()][: len(_proofs) // 2 + 1]:
-                    del _proofs[old]
-            proof = _proofs[key] = _Proof(task)
-    return proof
-
-
-def _run_proof(key: Hashable, task: Callable[[], tuple], budget_s: float) -> tuple[bool | None, str]:
-    return _start_proof(key, task).wait(budget_s)
-
-
 def _key(ps: PoissonStructure) -> tuple:
     return (ps.variables, tuple(ps.matrix))
 
@@ -236,7 +180,7 @@ def jacobi_symbolic(ps: PoissonStructure, budget_s: float = 20.0) -> tuple[bool 
         ``True`` (proved), ``False`` (a Jacobiator is not identically zero; the detail names it) or
         ``None`` (undecided: budget exhausted or a non-rational expression not reduced).
     """
-    return _run_proof(("jacobi",) + _key(ps), lambda: _prove_jacobi(ps), budget_s)
+    return bounded.prove(("jacobi",) + _key(ps), _prove_jacobi, (ps,), budget_s)
 
 
 class _GroupedSums:
@@ -337,7 +281,7 @@ def _prove_casimir(ps: PoissonStructure, C: sp.Expr) -> tuple[bool | None, str]:
 def casimir_symbolic(ps: PoissonStructure, C: sp.Expr, budget_s: float = 20.0) -> tuple[bool | None, str]:
     """Whether ``{C, x_i} ≡ 0`` for every i (daemon thread under ``budget_s``, cached)."""
     C = sp.sympify(C)
-    return _run_proof(("casimir", C) + _key(ps), lambda: _prove_casimir(ps, C), budget_s)
+    return bounded.prove(("casimir", C) + _key(ps), _prove_casimir, (ps, C), budget_s)
 
 
 def casimir_checks(ps: PoissonStructure, budget_s: float = 20.0) -> list[tuple[str, bool | None, str]]:
@@ -574,13 +518,15 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
     p = np.zeros(0)
 
     # Start every proof; they share the budget.
-    antisymmetry = _start_proof(("antisymmetry",) + _key(ps), lambda: _prove_antisymmetry(P, names))
+    antisymmetry_key = ("antisymmetry",) + _key(ps)
+    bounded.start(antisymmetry_key, _prove_antisymmetry, (P, tuple(names)))
     jacobi_symbolic(ps, 0.0)
     for C in candidates.values():
         casimir_symbolic(ps, C, 0.0)
 
     # Antisymmetry.
-    verdict, detail = antisymmetry.wait(deadline - time.monotonic())
+    verdict, detail, offending = bounded.verdict(
+        bounded.run(antisymmetry_key, _prove_antisymmetry, (P, tuple(names)), deadline - time.monotonic()))
     anti_res = _max_residual(_GroupedSums([[P[i, j], P[j, i]] for i in range(n) for j in range(i, n)], variables),
                              X, p)
     method = "symbolic"
@@ -588,7 +534,7 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
         method, verdict = "pointwise", bool(np.isfinite(anti_res) and anti_res <= POINTWISE_TOLERANCE)
         detail = f"{detail}; pointwise max |P_ij + P_ji| / (|P_ij| + |P_ji|) = {anti_res:.3g}"
     antisymmetric = {"passed": verdict, "method": method, "residual": _json_float(anti_res),
-                     "offending": list(antisymmetry.payload or []), "detail": detail}
+                     "offending": list(offending or []), "detail": detail}
 
     # Jacobi.
     verdict, detail = jacobi_symbolic(ps, deadline - time.monotonic())

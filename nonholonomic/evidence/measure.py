@@ -10,13 +10,12 @@ of the terms that cancel), maximised over the states.
 
 from __future__ import annotations
 
-import threading
-import time
 from dataclasses import dataclass
 
 import numpy as np
 import sympy as sp
 
+from nonholonomic import bounded
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.kernels import numeric
 
@@ -58,44 +57,15 @@ def _prove(system: MechanicalSystem, density: sp.Expr) -> tuple[bool, str]:
     return False, f"div(rho f)/rho has a non-zero numerator with {len(sp.Add.make_args(numerator))} terms"
 
 
-class _Proof:
-    """A symbolic proof running in a daemon thread, so a caller can stop waiting for it."""
-
-    def __init__(self, system: MechanicalSystem, density: sp.Expr) -> None:
-        self.done = threading.Event()
-        self.result: tuple[bool | None, str] = (None, "not finished")
-        self.seconds = 0.0
-        threading.Thread(target=self._run, args=(system, density), daemon=True, name="measure-proof").start()
-
-    def _run(self, system: MechanicalSystem, density: sp.Expr) -> None:
-        start = time.perf_counter()
-        try:
-            self.result = _prove(system, density)
-        except Exception as exc:  # sympy failures leave the claim unresolved, not the job failed
-            self.result = (None, f"sympy could not decide: {type(exc).__name__}: {exc}")
-        self.seconds = time.perf_counter() - start
-        self.done.set()
-
-
-_proofs: dict[tuple[MechanicalSystem, sp.Expr], _Proof] = {}
-_proofs_lock = threading.Lock()
-
-
 def symbolic_divergence_vanishes(system: MechanicalSystem, density: sp.Expr | None = None,
                                  budget_s: float = SYMBOLIC_BUDGET_S) -> tuple[bool | None, str]:
     """Whether ``div(ρ f) ≡ 0`` identically (parameters symbolic). None if undecided in ``budget_s``.
 
-    The proof keeps running after a timeout and later calls get its result.
+    The proof keeps running after a timeout and later calls get its result
+    (:mod:`nonholonomic.bounded`).
     """
     density = system.measure.density if density is None else density
-    with _proofs_lock:
-        proof = _proofs.get((system, density))
-        if proof is None:
-            proof = _proofs[(system, density)] = _Proof(system, density)
-    if not proof.done.wait(budget_s):
-        return None, f"symbolic proof did not finish within {budget_s:g} s"
-    proven, detail = proof.result
-    return proven, f"{detail} ({proof.seconds:.2f} s, cached per process)"
+    return bounded.prove(("measure", system, density), _prove, (system, density), budget_s)
 
 
 def pointwise_divergence_residual(system: MechanicalSystem, parameters: np.ndarray, states: np.ndarray) -> float:

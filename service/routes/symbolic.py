@@ -62,14 +62,50 @@ def hamiltonize(request: HamiltonizeRequest) -> dict[str, Any]:
     symbols = _declare(names, "coordinates")
     parsed = {field: _parse(getattr(request, field), symbols, field) for field in ("lagrangian", "a1", "a2", "b")}
     potential = None if request.potential is None else _parse(request.potential, symbols, "potential")
+    domain, shift, multiplier = _monopole(request, symbols)
     try:
         result = reduce(parsed["lagrangian"], tuple(symbols[q] for q in request.coordinates),  # type: ignore[arg-type]
                         tuple(symbols[v] for v in request.velocities),  # type: ignore[arg-type]
                         parsed["a1"], parsed["a2"], parsed["b"], potential,
-                        {symbols[k]: v for k, v in request.parameters.items()}, budget_s=request.budget_s)
+                        {symbols[k]: v for k, v in request.parameters.items()}, budget_s=request.budget_s,
+                        domain=domain, shift=shift, multiplier_symbol=multiplier)
     except ValueError as exc:
         raise invalid_request([FieldError(field="lagrangian", reason=str(exc))]) from None
     return result.to_json()
+
+
+#: The name standing for the reducing multiplier N in ``monopole.shift``.
+MULTIPLIER_NAME = "N"
+
+
+def _monopole(request: HamiltonizeRequest, symbols: dict[str, sp.Symbol]) -> tuple[Any, Any, sp.Symbol | None]:
+    """The chart (floats), the shift W (sympy, may contain N) and N's symbol of ``request.monopole``."""
+    spec = request.monopole
+    if spec is None:
+        return None, None, None
+    domain = []
+    for i, pair in enumerate(spec.domain):
+        bounds = []
+        for j, text in enumerate(pair):
+            value = _parse(text, {}, f"monopole.domain[{i}][{j}]")
+            if not (value.is_number and value.is_real and value.is_finite):
+                raise invalid_request([FieldError(field=f"monopole.domain[{i}][{j}]",
+                                                  reason="must be a finite real constant (numbers and pi)")])
+            bounds.append(float(value))
+        if not bounds[0] < bounds[1]:
+            raise invalid_request([FieldError(field=f"monopole.domain[{i}]",
+                                              reason=f"the lower bound {bounds[0]:g} must be below the upper {bounds[1]:g}")])
+        domain.append((bounds[0], bounds[1]))
+    if spec.shift is None:
+        return tuple(domain), None, None
+    if MULTIPLIER_NAME in symbols:
+        raise invalid_request([FieldError(field="monopole.shift", reason=(
+            f"'{MULTIPLIER_NAME}' stands for the reducing multiplier in the shift; rename the declared name "
+            f"'{MULTIPLIER_NAME}'"))])
+    N = sp.Symbol(MULTIPLIER_NAME, real=True)
+    allowed = {name: symbols[name] for name in request.coordinates + list(request.parameters) + request.symbols}
+    shift = tuple(_parse(text, {**allowed, MULTIPLIER_NAME: N}, f"monopole.shift[{k}]") for k, text in enumerate(spec.shift))
+    return tuple(domain), shift, N
 
 
 def _free_names(*texts: str) -> list[str]:
@@ -82,7 +118,11 @@ def _free_names(*texts: str) -> list[str]:
 
 @router.get("/v1/hamiltonize/examples", summary="Worked examples: Veselova and Chaplygin's ball in Euler angles")
 def hamiltonize_examples() -> dict[str, Any]:
-    from nonholonomic.local_forms import chaplygin_ball_generalized_chaplygin, veselova_generalized_chaplygin
+    from nonholonomic.local_forms import (
+        BALL_MONOPOLE_CHART,
+        chaplygin_ball_generalized_chaplygin,
+        veselova_generalized_chaplygin,
+    )
 
     examples = {}
     for name, build in (("veselova", veselova_generalized_chaplygin), ("chaplygin_ball", chaplygin_ball_generalized_chaplygin)):
@@ -92,4 +132,5 @@ def hamiltonize_examples() -> dict[str, Any]:
         used = _free_names(*fields.values())
         examples[name] = {**fields, "coordinates": coordinates, "velocities": velocities,
                           "symbols": [n for n in used if n not in coordinates + velocities]}
+    examples["chaplygin_ball"]["monopole"] = BALL_MONOPOLE_CHART
     return {"examples": examples}

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+import sympy as sp
 
 from tests.api.conftest import job
 from tests.support import poll_job
@@ -61,6 +63,53 @@ def test_hamiltonize_refuses_unknown_names_and_non_quadratic_lagrangians(client)
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "b"
     r = client.post("/v1/hamiltonize", json={**base, "lagrangian": "q1dot**4"})
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "lagrangian"
+
+
+BALL_VALUES = {"I1": 1.0, "I2": 1.4, "I3": 2.1, "D": 0.6}
+
+
+@pytest.mark.parametrize("c", [0.35, 0.0])
+def test_the_ball_gyroscopic_form_is_a_monopole_of_charge_c(client, c):
+    """Text after eq. 2704-9: for c != 0 no global canonical form. The smooth form integrates to
+    -4 pi c k / sqrt(I1 I2 I3), k = N / rho_mu (N is found up to a constant factor)."""
+    example = client.get("/v1/hamiltonize/examples").json()["examples"]["chaplygin_ball"]
+    assert example["monopole"] == {"domain": [["0", "pi"], ["0", "2*pi"]], "shift": ["0", "c*N*cos(theta)"]}
+    r = client.post("/v1/hamiltonize", json={**example, "symbols": [], "parameters": {**BALL_VALUES, "c": c}})
+    assert r.status_code == 200, r.text
+    result = r.json()
+    monopole = result["monopole"]
+    I1, I2, I3, D = (BALL_VALUES[k] for k in ("I1", "I2", "I3", "D"))
+    at_pole = sp.sympify(result["reducing_multiplier"]).subs(
+        {"theta": 0, "phi": 0, "I1": I1, "I2": I2, "I3": I3, "D": D})
+    k = float(at_pole) * np.sqrt(I3 * (D + I1) * (D + I2))  # rho_mu = (I3 (D+I1)(D+I2))^(-1/2) at gamma = e3
+    expected = -4 * np.pi * c * k / np.sqrt(I1 * I2 * I3)
+    assert abs(monopole["integral"] - expected) <= 1e-9 * max(abs(expected), 1e-300) + 1e-13, (monopole, expected)
+    assert monopole["exact"] is (c == 0.0)
+    assert "monopole" in monopole["detail"] or c == 0.0
+    if c:
+        # the chart integral of S_bar alone is neither 0 nor the charge: p_phi is not a smooth fibre coordinate
+        assert abs(monopole["integral_S_bar"] - expected) > 0.1 * abs(expected)
+
+
+@pytest.mark.parametrize("monopole,field", [
+    ({"domain": [["0", "pi"], ["0", "theta"]]}, "monopole.domain[1][1]"),
+    ({"domain": [["pi", "0"], ["0", "2*pi"]]}, "monopole.domain[0]"),
+    ({"domain": [["0", "pi"], ["0", "2*pi"]], "shift": ["0", "thetadot*cos(theta)"]}, "monopole.shift[1]"),
+    ({"domain": [["0", "pi"], ["0", "2*pi", "3"]]}, "monopole.domain[1]"),
+])
+def test_hamiltonize_refuses_bad_monopole_charts(client, monopole, field):
+    example = client.get("/v1/hamiltonize/examples").json()["examples"]["chaplygin_ball"]
+    r = client.post("/v1/hamiltonize", json={**example, "monopole": monopole})
+    assert r.status_code == 422, r.text
+    assert r.json()["errors"][0]["field"] == field, r.json()
+
+
+def test_the_name_n_is_reserved_in_a_shift(client):
+    body = {"lagrangian": "(q1dot**2 + N*q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
+            "a1": "0", "a2": "0", "b": "sin(q1)", "symbols": ["N"],
+            "monopole": {"domain": [["0", "1"], ["0", "1"]], "shift": ["0", "N"]}}
+    r = client.post("/v1/hamiltonize", json=body)
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "monopole.shift", r.text
 
 
 @pytest.mark.parametrize("kind,state", [("chaplygin_ball", None), ("veselova", None)])
