@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from nonholonomic.definition import Parameter
+from nonholonomic.isomorphisms import maps_for
 from nonholonomic.simulation import available_checks
 from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
 
@@ -57,6 +58,7 @@ def describe(kind: str) -> dict[str, Any]:
             "unit": base.reduced_time.unit},
         "notes": list(base.notes),
         "checks": list(available_checks(base)),
+        "maps": {p: maps_for(kind, p) for p in potentials if maps_for(kind, p)},
         "example": getattr(module, "EXAMPLE", None),
         "time_unit": "s",
     }

@@ -138,6 +138,7 @@ def integrate(
     engine: str = "heyoka",
     tolerance: float | None = None,
     progress: ProgressCallback | None = None,
+    times: np.ndarray | None = None,
 ) -> Trajectory:
     """Integrate from t = 0 to ``t_final``, sampling ``samples`` equally spaced times (both ends).
 
@@ -151,6 +152,8 @@ def integrate(
     tolerance : heyoka's tolerance (default machine epsilon) or scipy's rtol = atol (default 1e-12).
     progress : called with the fraction of ``t_final`` reached after each step; returning False
         cancels (raises :class:`IntegrationCancelled`).
+    times : explicit sample times instead of the grid (non-decreasing, starting at 0; ``t_final``
+        and ``samples`` are then ignored), e.g. a source trajectory's reduced times τ.
 
     Raises
     ------
@@ -162,7 +165,12 @@ def integrate(
     y0 = np.asarray(initial_state, dtype=float)
     if y0.shape != (system.dimension,):
         raise ValueError(f"initial state needs {system.dimension} components, got {y0.shape}")
-    grid = _sample_grid(float(t_final), int(samples))
+    if times is None:
+        grid = _sample_grid(float(t_final), int(samples))
+    else:
+        grid = np.asarray(times, dtype=float)
+        if grid.ndim != 1 or len(grid) < 2 or grid[0] != 0.0 or np.any(np.diff(grid) < 0) or not np.all(np.isfinite(grid)):
+            raise ValueError("times must be finite, non-decreasing, start at 0 and have at least 2 entries")
     if engine == "heyoka":
         return _integrate_heyoka(system, p, y0, grid, tolerance or MACHINE_EPSILON, progress)
     return _integrate_scipy(system, p, y0, grid, tolerance or 1e-12, progress)

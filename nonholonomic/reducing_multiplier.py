@@ -121,7 +121,7 @@ def _weierstrass(expr: sp.Expr, q: Sequence[sp.Symbol]) -> sp.Expr | None:
     return e
 
 
-def _rational_trig_is_zero(expr: sp.Expr, q: tuple[sp.Symbol, ...]) -> bool | None:
+def rational_trig_is_zero(expr: sp.Expr, q: tuple[sp.Symbol, ...]) -> bool | None:
     """Exact decision of ``expr ≡ 0`` for ``expr`` rational in q, sin qᵢ, cos qᵢ and the parameters
     (t = tan(q/2), common denominator, numerator expanded). None if ``expr`` is not of that form."""
     e = _weierstrass(expr, q)
@@ -412,7 +412,7 @@ def _density_ansatz(A1: sp.Expr, A2: sp.Expr, extra: tuple[sp.Expr, ...], q: tup
             alpha.append(sp.cancel(rest.xreplace(dict(zip(q, BASE_POINT)))))
     log_rho = sum((e * sp.log(f) for e, f in used), sp.Integer(0)) + alpha[0] * q[0] + alpha[1] * q[1]
     for qi, target in zip(q, targets):  # an exact proof that d ln ρ = A₂ dq₁ − A₁ dq₂
-        if _rational_trig_is_zero(sp.diff(log_rho, qi) - target, q) is not True:
+        if rational_trig_is_zero(sp.diff(log_rho, qi) - target, q) is not True:
             return None
     # each factor's sign chosen positive at the base point (ρ is defined up to a constant factor)
     at_base = sp.lambdify(list(q) + names, [f for _, f in used], modules="mpmath")(*BASE_POINT, *par)
@@ -458,7 +458,7 @@ def _density_equations_hold(log_rho: sp.Expr, A1: sp.Expr, A2: sp.Expr, q: tuple
     verdicts = []
     for qi, target in zip(q, (A2, -A1)):
         e = sp.diff(log_rho, qi) - target
-        verdict = _rational_trig_is_zero(e, q)
+        verdict = rational_trig_is_zero(e, q)
         if verdict is None and not e.has(sp.Integral):
             verdict = True if sp.simplify(e) == 0 else None
         verdicts.append(verdict)
@@ -706,7 +706,7 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
     if exact_density:
         closed_detail = "implied by the exact density (d ln rho = A2 dq1 - A1 dq2 proved)"
     else:
-        status, closed, secs = _bounded(_rational_trig_is_zero, (sp.together(condition), q), remaining())
+        status, closed, secs = _bounded(rational_trig_is_zero, (sp.together(condition), q), remaining())
         closed_proven = status == "done" and closed is True
         closed_detail = (f"proved identically zero ({secs:.2f} s)" if closed_proven else
                          f"zero at 8 random points to {worst:.1e} (40 digits); symbolic proof: "

@@ -11,18 +11,20 @@ from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import IntegralEvidence, integral_evidence
 from nonholonomic.evidence.measure import CheckEvidence, measure_evidence
 from nonholonomic.integration import ProgressCallback, Trajectory, integrate
+from nonholonomic.isomorphisms import isomorphism_evidence, maps_for
 from nonholonomic.kernels import numeric, parameter_vector, state_vector
 from nonholonomic.structure import bracket_evidence, euler_angle_evidence, structural_checks
 
-#: Evidence a simulation can compute (``bracket`` and ``euler_angles`` only for some kinds, see
+#: Evidence a simulation can compute (``bracket``, ``euler_angles`` and ``isomorphisms`` only for some kinds, see
 #: :func:`available_checks`); jobs default to :data:`DEFAULT_CHECKS`.
-CHECKS = ("integrals", "measure", "bracket", "euler_angles")
+CHECKS = ("integrals", "measure", "bracket", "euler_angles", "isomorphisms")
 DEFAULT_CHECKS = ("integrals", "measure")
 
 
 def available_checks(system: MechanicalSystem) -> tuple[str, ...]:
     """The checks ``system`` supports."""
-    return DEFAULT_CHECKS + structural_checks(system.kind)
+    return DEFAULT_CHECKS + structural_checks(system.kind) + (
+        ("isomorphisms",) if maps_for(system.kind, system.potential) else ())
 
 
 @dataclass(frozen=True)
@@ -214,5 +216,7 @@ def simulate(
         evidence += bracket_evidence(system, p, trajectory.states)
     if "euler_angles" in checks:
         evidence += euler_angle_evidence(system, p, trajectory.states)
+    if "isomorphisms" in checks:
+        evidence += isomorphism_evidence(system, p, trajectory.t, trajectory.tau, trajectory.states)
     return SimulationResult(system, p, trajectory, derived, integrals, evidence,
                             parameter_warnings(system, parameters), projections)

@@ -8,6 +8,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nonholonomic.integration import SCIPY_MIN_TOLERANCE
 from nonholonomic.simulation import DEFAULT_CHECKS, FieldProblem, available_checks, initial_state_problems
+from schemas.report import PaperReport
 from schemas.settings import get_settings
 from schemas.results import SimulationResultModel
 from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
@@ -47,10 +48,11 @@ class JobRequest(BaseModel):
                     "for the ball 'omega' may replace 'M'")
     t_final: FiniteFloat = Field(gt=0, description="end of the integration interval [0, t_final], in s")
     samples: int = Field(201, ge=2, description="number of equally spaced sample times, both ends included")
-    checks: list[Literal["integrals", "measure", "bracket", "euler_angles"]] = Field(
+    checks: list[Literal["integrals", "measure", "bracket", "euler_angles", "isomorphisms"]] = Field(
         default_factory=lambda: list(DEFAULT_CHECKS),
         description="evidence to compute (default integrals and measure); 'bracket' (Hamiltonian form after the "
-                    "time substitution) and 'euler_angles' (local forms) where the catalog lists them")
+                    "time substitution), 'euler_angles' (local forms) and 'isomorphisms' (the paper's maps to "
+                    "e(3), Neumann, Clebsch, Veselova) where the catalog lists them")
     integrator: IntegratorOptions = Field(default_factory=IntegratorOptions)
     project_initial_state: bool = Field(
         False, description="move an initial state that is off a constraint (|gamma| = 1, (omega, gamma) = 0, "
@@ -110,5 +112,5 @@ class JobView(BaseModel):
     progress: float = Field(ge=0, le=1)
     created_at: str
     request: dict[str, Any]
-    result: SimulationResultModel | None = None
+    result: SimulationResultModel | PaperReport | None = None
     error: JobError | None = None

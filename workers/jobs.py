@@ -8,6 +8,7 @@ from typing import Any
 from nonholonomic.integration import ProgressCallback
 from nonholonomic.simulation import simulate
 from schemas.jobs import JobRequest
+from schemas.report import REPORT_JOB, PaperReportRequest
 from schemas.results import result_to_json
 
 
@@ -20,7 +21,7 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
 
     Parameters
     ----------
-    request : a ``JobRequest`` as JSON.
+    request : a ``JobRequest`` as JSON, or a ``PaperReportRequest`` (``"job": "paper_report"``).
     progress : ``progress(fraction) -> keep_going``; returning False cancels the job
         (:class:`nonholonomic.integration.IntegrationCancelled` is raised).
 
@@ -30,6 +31,8 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
         The ``SimulationResultModel`` as JSON. The same request gives the same numbers
         (only ``integration.wall_time_s`` differs).
     """
+    if request.get("job") == REPORT_JOB:
+        return run_report(request, progress)
     job = JobRequest.model_validate(request)
     problems = job.problems()
     if problems:
@@ -41,6 +44,21 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
         checks=job.checks, project=job.project_initial_state, engine=job.integrator.engine, tolerance=job.integrator.tolerance, progress=progress,
     )
     return result_to_json(result, parameters)
+
+
+def run_report(request: dict[str, Any], progress: ProgressCallback | None = None) -> dict[str, Any]:
+    """Run the paper report (every claim, or ``claims``); returns the ``PaperReport`` as JSON.
+
+    Cancelling stops between claims (:class:`IntegrationCancelled` is raised, as for a simulation).
+    """
+    from nonholonomic.integration import IntegrationCancelled
+    from nonholonomic.report import paper_report
+
+    job = PaperReportRequest.model_validate(request)
+    report = paper_report(progress, only=job.claims)
+    if not report["complete"]:
+        raise IntegrationCancelled("the report was cancelled")
+    return report
 
 
 def warm_up() -> None:

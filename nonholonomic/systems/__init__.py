@@ -17,10 +17,11 @@ from nonholonomic.systems import (
     neumann,
     rubber_ball,
     veselova,
+    veselova_e3,
 )
 
 SYSTEMS: dict[str, ModuleType] = {module.KIND: module for module in (
-    chaplygin_ball, veselova, chaplygin_ball_veselova, rubber_ball, ball_on_quadric, neumann, clebsch)}
+    chaplygin_ball, veselova, chaplygin_ball_veselova, rubber_ball, ball_on_quadric, neumann, clebsch, veselova_e3)}
 
 #: Potentials each kind accepts.
 SUPPORTED_POTENTIALS: dict[str, tuple[str, ...]] = {kind: tuple(m.POTENTIALS) for kind, m in SYSTEMS.items()}

@@ -25,6 +25,7 @@ from nonholonomic.definition import (
     InvariantMeasure,
     MechanicalSystem,
     Parameter,
+    Projection,
     ReducedTime,
     StateConstraint,
     StateVector,
@@ -138,5 +139,7 @@ def define(potential: str = "zero") -> MechanicalSystem:
                                "angular velocity, body frame", "rad/s"),),
         alternative_inputs=(AlternativeInput("omega", "M", tuple(omega_in), tuple(contact_inertia() * omega_in),
                                              "M = I_Q omega"),),
-        constraints=(StateConstraint("gamma", sp.sqrt(dot(gamma, gamma)), 1.0, "|gamma| = 1", "2604-2"),),
+        constraints=(StateConstraint("gamma", sp.sqrt(dot(gamma, gamma)), 1.0, "|gamma| = 1", "2604-2",
+                                     projection=Projection("gamma", tuple(gamma / sp.sqrt(dot(gamma, gamma))),
+                                                           "gamma -> gamma / |gamma|")),),
     )

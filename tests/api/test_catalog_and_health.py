@@ -23,7 +23,8 @@ def test_catalog_describes_the_ball(client):
     assert integrals["F"]["claimed_for_potentials"] == ["zero"] and integrals["F"]["equation"] == "2604-4"
     assert set(integrals["energy"]["claimed_for_potentials"]) == {"zero", "linear", "brun"}
     assert ball["measure"]["equation"] == "2604-3" and ball["reduced_time"]["equation"] == "2604-5"
-    assert ball["checks"] == ["integrals", "measure", "bracket", "euler_angles"]
+    assert ball["checks"] == ["integrals", "measure", "bracket", "euler_angles", "isomorphisms"]
+    assert ball["maps"] == {"zero": ["chaplygin_ball_to_clebsch"]}  # Theorem 3 holds for U = 0 only
     assert next(s for s in systems if s["kind"] == "neumann")["checks"] == ["integrals", "measure"]
     assert ball["alternative_inputs"][0]["name"] == "omega"
 
@@ -36,4 +37,5 @@ def test_unknown_kind_in_catalog_is_404(client):
 def test_openapi_docs_are_served(client):
     assert client.get("/docs").status_code == 200
     spec = client.get("/openapi.json").json()
-    assert {"/v1/jobs", "/v1/jobs/{job_id}", "/v1/systems", "/health"} <= set(spec["paths"])
+    assert {"/v1/jobs", "/v1/jobs/{job_id}", "/v1/systems", "/health", "/v1/maps/{name}", "/v1/paper/report",
+            "/v1/paper/report/{job_id}"} <= set(spec["paths"])

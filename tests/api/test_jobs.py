@@ -93,7 +93,7 @@ INVALID = [
     ("unknown state", job(initial_state={**STATE, "x": [0, 0, 1]}), "initial_state.x", "not a state variable"),
     ("M and omega", job(initial_state={**STATE, "omega": [0, 0, 1]}), "initial_state.omega", "only one"),
     ("unknown field", {**job(), "tfinal": 3}, "tfinal", "Extra inputs"),
-    ("unknown check", job(checks=["isomorphisms"]), "checks[0]", "Input should be"),
+    ("unknown check", job(checks=["lyapunov"]), "checks[0]", "Input should be"),
     ("scipy too tight", job(integrator={"engine": "scipy", "tolerance": 1e-15}), "integrator.tolerance", "cannot honour"),
     ("unknown engine", job(integrator={"engine": "rk4"}), "integrator.engine", "Input should be"),
     ("not JSON", "{not json", "body", "not valid JSON"),

@@ -139,6 +139,23 @@ def test_progress_moves_and_cancel_stops_the_running_job(queue_stack):
     assert client.get(location).json()["status"] == "cancelled"
 
 
+def test_paper_report_and_a_map_run_through_the_worker(queue_stack):
+    client, _, _ = queue_stack
+    r = client.post("/v1/paper/report", json={"claims": ["ball.theorem_3", "veselova.multiplier"]})
+    assert r.status_code == 202
+    view = poll_job(client, r.headers["location"], timeout=300)
+    assert view["status"] == "succeeded", view["error"]
+    assert {row["id"]: row["verdict"] for row in view["result"]["rows"]} == {
+        "veselova.multiplier": "holds after correction", "ball.theorem_3": "holds after correction"}
+    page = client.get(f"/v1/paper/report/{view['id']}")
+    assert page.status_code == 200 and "ERRATA 8" in page.text
+    job = {**BODY, "system": {**BODY["system"], "potential": {"kind": "zero"}}, "checks": ["isomorphisms"],
+           "initial_state": {"M": [0.5, -0.2, 0.15], "gamma": [0.0, 0.6, 0.8]}}  # Theorem 3: U = 0, (M, gamma) = 0
+    view = poll_job(client, client.post("/v1/jobs", json=job).headers["location"], timeout=120)
+    assert view["status"] == "succeeded", view["error"]
+    assert [c["passed"] for c in view["result"]["checks"]] == [True, True]
+
+
 def test_same_request_gives_the_same_numbers(queue_stack):
     client, _, _ = queue_stack
     results = [poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"])["result"] for _ in range(2)]

@@ -1,0 +1,65 @@
+"""``POST /v1/paper/report``: the paper report as a job, and its result model."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+#: The job's marker in the stored request (simulation jobs have a ``system`` instead).
+REPORT_JOB = "paper_report"
+
+
+class PaperReportRequest(BaseModel):
+    """Which claims to check (default: every claim of the paper)."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{}, {"claims": ["ball.theorem_3"]}]})
+
+    job: Literal["paper_report"] = REPORT_JOB
+    claims: list[str] | None = Field(
+        None, min_length=1, description="claim ids (GET /v1/paper/claims lists them); default: all")
+
+    @field_validator("claims")
+    @classmethod
+    def _known(cls, claims: list[str] | None) -> list[str] | None:
+        if claims is None:
+            return None
+        from nonholonomic.report import claim_ids
+
+        known = claim_ids()
+        unknown = [f"claims[{i}] = {c!r}" for i, c in enumerate(claims) if c not in known]
+        if unknown:
+            raise ValueError(f"unknown claim ids: {', '.join(unknown)}; known: {', '.join(known)}")
+        return claims
+
+
+class ReportRow(BaseModel):
+    """One claim: what it says, where, the verdict, the decisive residual and tolerance."""
+
+    id: str
+    section: str
+    claim: str
+    equation: str
+    verdict: Literal["holds", "holds after correction", "fails", "unresolved"]
+    residual: float | None
+    tolerance: float | None
+    method: str | None
+    printed: str | None
+    corrected: str | None
+    errata: str | None
+    checks: list[dict[str, Any]]
+    printed_check: dict[str, Any] | None
+    note: str | None
+    seconds: float
+
+
+class PaperReport(BaseModel):
+    """The report: a row per claim and the count of each verdict."""
+
+    paper: str
+    source: str
+    complete: bool
+    summary: dict[str, int]
+    rows: list[ReportRow]
+    seconds: float
+    verdicts: dict[str, str]

@@ -1,0 +1,45 @@
+"""``/v1/paper``: the paper report as a job (JSON through ``/v1/jobs/{id}``) and as an HTML page."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Body, Request, Response
+from fastapi.responses import HTMLResponse
+
+from schemas.jobs import JobAccepted
+from schemas.problems import NOT_FOUND
+from schemas.report import REPORT_JOB, PaperReportRequest
+from service.errors import ProblemError
+from service.report_page import render_report, render_status
+
+router = APIRouter(prefix="/v1/paper", tags=["paper report"])
+
+
+@router.get("/claims", summary="The claims the report checks (ids for POST /v1/paper/report)")
+def list_claims() -> dict[str, Any]:
+    from nonholonomic.report import claim_ids
+
+    return {"claims": claim_ids()}
+
+
+@router.post("/report", status_code=202, response_model=JobAccepted,
+             summary="Check every claim of the paper (a job; the HTML page is /v1/paper/report/{id})")
+def submit_report(request: Request, response: Response,
+                  body: PaperReportRequest | None = Body(None)) -> JobAccepted:  # noqa: B008
+    job = body or PaperReportRequest()
+    record = request.app.state.backend.submit(job.model_dump(mode="json"))
+    location = f"/v1/jobs/{record.id}"
+    response.headers["Location"] = location
+    response.headers["Link"] = f'</v1/paper/report/{record.id}>; rel="alternate"; type="text/html"'
+    return JobAccepted(id=record.id, status="queued", location=location)
+
+
+@router.get("/report/{job_id}", response_class=HTMLResponse, summary="The report as a page a person reads")
+def report_page(job_id: str, request: Request) -> HTMLResponse:
+    record = request.app.state.backend.get(job_id)
+    if record is None or record.request.get("job") != REPORT_JOB:
+        raise ProblemError(404, "Unknown report", f"no paper report job with id {job_id!r}", NOT_FOUND)
+    if record.status == "succeeded" and record.result is not None:
+        return HTMLResponse(render_report(record.result, job_id))
+    return HTMLResponse(render_status(job_id, record.status, record.progress, record.error))
