@@ -429,6 +429,8 @@ class TrajectoryComparison:
     relative_distance: float
     parameter_spread: float
     tolerance: float
+    segment_distance: float
+    segments: int
 
 
 def compare_trajectories(m: IsomorphismMap, parameters: np.ndarray, t: np.ndarray, tau: np.ndarray | None,
@@ -454,8 +456,17 @@ def compare_trajectories(m: IsomorphismMap, parameters: np.ndarray, t: np.ndarra
     distance = float(np.max(diff))
     size = float(np.max(np.abs(mapped["states"])))
     tolerance = max(TRAJECTORY_TOLERANCE_FLOOR, TRAJECTORY_TOLERANCE_RATE * float(abs(times[-1])))
+    # restarted from the mapped state at the start of each of (at most) 50 sample intervals
+    segment = 0.0
+    starts = np.unique(np.linspace(0, len(times) - 2, min(len(times) - 1, 50)).astype(int))
+    for k in starts:
+        step = float(times[k + 1] - times[k])
+        if step <= 0:
+            continue
+        end = integrate(m.target, p_target[0], mapped["states"][k], 0.0, 0, times=np.array([0.0, step])).states[-1]
+        segment = max(segment, float(np.max(np.abs(end - mapped["states"][k + 1]))))
     return TrajectoryComparison(times, mapped["states"], target.states, distance, distance / max(size, 1e-300),
-                                spread, tolerance)
+                                spread, tolerance, segment, len(starts))
 
 
 def isomorphism_evidence(system: MechanicalSystem, parameters: np.ndarray, t: np.ndarray, tau: np.ndarray | None,
@@ -486,15 +497,25 @@ def isomorphism_evidence(system: MechanicalSystem, parameters: np.ndarray, t: np
                     f"+ |g(Phi)|_1), g the field of {m.target.kind} with the target parameters of each state; "
                     + "; ".join(m.corrections))))
         cmp = compare_trajectories(m, parameters, t, tau, states)
-        ok = bool(np.isfinite(cmp.distance) and cmp.distance <= cmp.tolerance and cmp.parameter_spread <= 1e-10)
+        whole = bool(np.isfinite(cmp.distance) and cmp.distance <= cmp.tolerance)
+        local = bool(np.isfinite(cmp.segment_distance) and cmp.segment_distance <= TRAJECTORY_TOLERANCE_FLOOR)
+        constant = cmp.parameter_spread <= 1e-10
+        detail = (f"{m.target.kind} integrated by heyoka from the mapped initial state at the same "
+                  f"{'reduced times tau' if m.time_variable == 'tau' else 'times t'} (up to {cmp.times[-1]:.6g}): "
+                  f"max |mapped - target| = {cmp.distance:.3g} (relative {cmp.relative_distance:.3g}); restarted from "
+                  f"the mapped state at {cmp.segments} sample intervals: {cmp.segment_distance:.3g} (tolerance "
+                  f"{TRAJECTORY_TOLERANCE_FLOOR:g}); the target parameters (level constants) vary by "
+                  f"{cmp.parameter_spread:.2g} along the trajectory")
+        if not whole and local:
+            detail += ("; the whole-horizon distance exceeds its tolerance while every restarted interval agrees: "
+                       "nearby trajectories separate (sensitive dependence), so round-off of 1e-16 grows; the map "
+                       "is judged on the intervals")
         out.append(CheckEvidence(
             name=f"isomorphism:{name}", quantity="mapped trajectory vs independently integrated target",
-            formula=m.formula, equation=m.equation, method="trajectory", residual=cmp.distance,
-            tolerance=cmp.tolerance, passed=ok,
-            detail=(f"{m.target.kind} integrated by heyoka from the mapped initial state at the same "
-                    f"{'reduced times tau' if m.time_variable == 'tau' else 'times t'} (up to {cmp.times[-1]:.6g}); "
-                    f"max |mapped - target| = {cmp.distance:.3g} (relative {cmp.relative_distance:.3g}); the target "
-                    f"parameters (level constants) vary by {cmp.parameter_spread:.2g} along the trajectory")))
+            formula=m.formula, equation=m.equation, method="trajectory",
+            residual=cmp.distance if whole else cmp.segment_distance,
+            tolerance=cmp.tolerance if whole else TRAJECTORY_TOLERANCE_FLOOR,
+            passed=bool((whole or local) and constant), detail=detail))
         if m.inverse is not None:
             k = kernels(m)
             back = k.inverse(apply(m, parameters, states[idx])["states"], parameters)  # type: ignore[misc]

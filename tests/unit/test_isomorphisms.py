@@ -175,3 +175,25 @@ def test_map_states_reports_projections_and_refuses_off_level_states():
     assert abs(s @ s - 1) < 1e-14 and abs(s @ L) < 1e-14
     assert out["target_job_system"]["kind"] == "clebsch"  # type: ignore[index]
     assert out["push_forward_residual"]["passed"] is True  # type: ignore[index]
+
+
+def test_a_chaotic_trajectory_is_judged_on_restarted_intervals_and_a_wrong_map_still_fails():
+    # Veselova in a linear field over t = 1000: nearby trajectories separate, so the whole-horizon
+    # distance between the mapped and the target trajectory reaches O(1) by round-off alone.
+    system = get_system("veselova", "linear")
+    result = simulate(system, {"inertia": INERTIA, "a": [0.3, -0.2, 0.5]},
+                      {"omega": [0.5, -0.2, 0.15], "gamma": [0.0, 0.6, 0.8]}, 1000.0, 201, checks=["isomorphisms"])
+    (item,) = [c for c in result.checks if c.method == "trajectory"]
+    assert item.passed is True and item.residual <= 1e-9 and "sensitive dependence" in item.detail
+    m, p = setup("veselova_to_e3", "linear", {"inertia": INERTIA, "a": [0.3, -0.2, 0.5]})
+    cmp = iso.compare_trajectories(m, p, result.trajectory.t, result.trajectory.tau, result.trajectory.states)
+    assert cmp.distance > 1e-3 and cmp.segment_distance <= 1e-12  # measured 1.9 and 2e-13
+    # a map that is wrong (the printed sign of k in Proposition 1) fails interval by interval too
+    e3, q = setup("e3_to_clebsch", "zero", {"inertia": INERTIA, "alpha": 0.7, "beta": -0.4})
+    k_at = [str(s) for s in e3.target.parameter_symbols].index("k")
+    flipped = list(e3.target_parameters)
+    flipped[k_at] = -flipped[k_at]
+    wrong = dataclasses.replace(e3, target_parameters=tuple(flipped))
+    source = integrate(e3.source, q, iso.sample_states(e3, q, 1)[0], 100.0, 101)
+    bad = iso.compare_trajectories(wrong, q, source.t, source.tau, source.states)
+    assert bad.distance > 0.1 and bad.segment_distance > 1e-2
