@@ -29,12 +29,11 @@ from nonholonomic.definition import (
     InvariantMeasure,
     MechanicalSystem,
     Projection,
-    StateConstraint,
     dot,
 )
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.integration import integrate
-from nonholonomic.kernels import VectorKernel, numeric, vectorize
+from nonholonomic.kernels import VectorKernel, vectorize
 
 #: Relative push-forward residual accepted as round-off.
 PUSH_FORWARD_TOLERANCE = 1e-10

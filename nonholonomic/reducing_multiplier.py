@@ -86,6 +86,8 @@ NUMERIC_ZERO = 1e-25
 POINTWISE_TOLERANCE = 1e-20
 #: Digits of the mpmath evaluations.
 DIGITS = 40
+#: Largest 2-form (sympy operation count) for which monopole_charge tries sympy's exact integral.
+SYMBOLIC_INTEGRAL_MAX_OPS = 40
 #: Base point of the line integral for ln ρ (inside (0, π/2)², where angle charts are regular).
 BASE_POINT = (sp.Rational(7, 10), sp.Rational(2, 5))
 
@@ -874,6 +876,11 @@ def monopole_charge(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
         out["detail"] += (f"; the chart integral of S_bar alone is {out['integral_S_bar']:.12g} (the momenta p differ "
                           "from smooth fibre coordinates by W)")
     if symbolic_budget_s <= 0:
+        return out
+    if sp.count_ops(form) > SYMBOLIC_INTEGRAL_MAX_OPS:
+        # sympy's integrate does not return on large forms (the ball's S_bar), and a thread past its
+        # budget cannot be stopped: it would hold the interpreter for the rest of the process
+        out["detail"] += f"; sympy's exact integral not attempted (form has {sp.count_ops(form)} operations)"
         return out
     exact_domain = tuple(tuple(sp.nsimplify(x, [sp.pi]) for x in pair) for pair in domain)
     status, sym, _ = _bounded(_symbolic_area_integral, (form, q, exact_domain), symbolic_budget_s)

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from tests.api.conftest import job
 from tests.support import poll_job
 
 SO3 = {"variables": ["x", "y", "z"], "matrix": [["0", "z", "-y"], ["-z", "0", "x"], ["y", "-x", "0"]],
