@@ -122,8 +122,9 @@ def project_initial_state(system: MechanicalSystem, p: np.ndarray,
 def constraint_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
     """Constraints ``y`` violates beyond their tolerance."""
     kernels = numeric(system)
-    values = kernels.constraints(y[None, :], p)[0]
-    scales = kernels.constraint_scales(y[None, :], p)[0]
+    with np.errstate(over="ignore", invalid="ignore"):  # huge inputs give inf/nan, reported below
+        values = kernels.constraints(y[None, :], p)[0]
+        scales = kernels.constraint_scales(y[None, :], p)[0]
     problems = []
     for constraint, value, scale in zip(system.constraints, values, scales):
         deviation = float(value - constraint.value)

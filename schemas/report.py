@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field
 
 #: The job's marker in the stored request (simulation jobs have a ``system`` instead).
 REPORT_JOB = "paper_report"
@@ -19,18 +19,15 @@ class PaperReportRequest(BaseModel):
     claims: list[str] | None = Field(
         None, min_length=1, description="claim ids (GET /v1/paper/claims lists them); default: all")
 
-    @field_validator("claims")
-    @classmethod
-    def _known(cls, claims: list[str] | None) -> list[str] | None:
-        if claims is None:
-            return None
+    def problems(self) -> list[tuple[str, str]]:
+        """``(field, reason)`` for every unknown claim id (``claims[i]``)."""
+        if self.claims is None:
+            return []
         from nonholonomic.report import claim_ids
 
         known = claim_ids()
-        unknown = [f"claims[{i}] = {c!r}" for i, c in enumerate(claims) if c not in known]
-        if unknown:
-            raise ValueError(f"unknown claim ids: {', '.join(unknown)}; known: {', '.join(known)}")
-        return claims
+        return [(f"claims[{i}]", f"unknown claim id {c!r}; GET /v1/paper/claims lists the {len(known)} known ones")
+                for i, c in enumerate(self.claims) if c not in known]
 
 
 class ReportRow(BaseModel):

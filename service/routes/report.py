@@ -8,9 +8,9 @@ from fastapi import APIRouter, Body, Request, Response
 from fastapi.responses import HTMLResponse
 
 from schemas.jobs import JobAccepted
-from schemas.problems import NOT_FOUND
+from schemas.problems import NOT_FOUND, FieldError
 from schemas.report import REPORT_JOB, PaperReportRequest
-from service.errors import ProblemError
+from service.errors import ProblemError, invalid_request
 from service.report_page import render_report, render_status
 
 router = APIRouter(prefix="/v1/paper", tags=["paper report"])
@@ -28,6 +28,9 @@ def list_claims() -> dict[str, Any]:
 def submit_report(request: Request, response: Response,
                   body: PaperReportRequest | None = Body(None)) -> JobAccepted:  # noqa: B008
     job = body or PaperReportRequest()
+    problems = job.problems()
+    if problems:
+        raise invalid_request([FieldError(field=f, reason=r) for f, r in problems])
     record = request.app.state.backend.submit(job.model_dump(mode="json"))
     location = f"/v1/jobs/{record.id}"
     response.headers["Location"] = location
