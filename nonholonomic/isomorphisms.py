@@ -448,8 +448,9 @@ def compare_trajectories(m: IsomorphismMap, parameters: np.ndarray, t: np.ndarra
         times = np.asarray(t, dtype=float)
     mapped = apply(m, parameters, states)
     p_target = mapped["target_parameters"]
-    spread = float(np.max(np.abs(p_target - p_target[0]) / np.maximum(np.abs(p_target[0]), 1e-300))) \
-        if p_target.size else 0.0
+    # relative to each parameter's size along the trajectory (a level constant may be 0, e.g. c at rest)
+    size_p = np.maximum(np.max(np.abs(p_target), axis=0), 1e-12) if p_target.size else np.ones(0)
+    spread = float(np.max(np.abs(p_target - p_target[0]) / size_p)) if p_target.size else 0.0
     target = integrate(m.target, p_target[0], mapped["states"][0], 0.0, 0, times=times)
     diff = np.abs(mapped["states"] - target.states)
     distance = float(np.max(diff))

@@ -7,11 +7,14 @@ from typing import Any
 
 _COLOURS = {"holds": "#1b7f3b", "holds after correction": "#9a6700", "fails": "#b42318", "unresolved": "#57606a"}
 _STYLE = """
-body{font-family:system-ui,sans-serif;margin:2rem auto;max-width:75rem;line-height:1.4;color:#1f2328}
+body{font-family:system-ui,sans-serif;margin:2rem auto;max-width:85rem;line-height:1.4;color:#1f2328}
 table{border-collapse:collapse;width:100%;font-size:.9rem}th,td{border-bottom:1px solid #d0d7de;padding:.4rem;
-vertical-align:top;text-align:left}th{background:#f6f8fa}code{font-size:.85rem}.v{font-weight:600;white-space:nowrap}
+vertical-align:top;text-align:left}th{background:#f6f8fa}code{font-size:.85rem}.v{font-weight:600}
 details{font-size:.8rem;color:#57606a}.num{font-family:monospace;white-space:nowrap}h2{margin-top:2rem}
+table{table-layout:fixed}td{overflow-wrap:anywhere}
 """
+_COLUMNS = (("claim id", 12), ("claim", 27), ("equation", 8), ("verdict", 12), ("method", 8), ("residual", 7),
+            ("tolerance", 7), ("correction", 19))
 
 
 def _num(x: Any) -> str:
@@ -39,6 +42,7 @@ def _row(row: dict[str, Any]) -> str:
     return (f"<tr id=\"{escape(row['id'])}\"><td><code>{escape(row['id'])}</code></td>"
             f"<td>{escape(row['claim'])}<details><summary>checks</summary><ul>{checks}</ul></details></td>"
             f"<td>{escape(row['equation'])}</td><td class=\"v\" style=\"color:{colour}\">{escape(row['verdict'])}</td>"
+            f"<td>{escape(str(row.get('method') or '–'))}</td>"
             f"<td class=\"num\">{_num(row['residual'])}</td><td class=\"num\">{_num(row['tolerance'])}</td>"
             f"<td>{fix}</td></tr>")
 
@@ -49,8 +53,8 @@ def render_report(report: dict[str, Any], job_id: str) -> str:
     sections: dict[str, list[dict[str, Any]]] = {}
     for row in report["rows"]:
         sections.setdefault(row["section"], []).append(row)
-    head = ("<tr><th>claim id</th><th>claim</th><th>equation</th><th>verdict</th><th>residual</th>"
-            "<th>tolerance</th><th>correction</th></tr>")
+    head = ("<colgroup>" + "".join(f'<col style="width:{w}%">' for _, w in _COLUMNS) + "</colgroup><tr>"
+            + "".join(f"<th>{name}</th>" for name, _ in _COLUMNS) + "</tr>")
     body = "".join(f"<h2>{escape(name)}</h2><table>{head}{''.join(_row(r) for r in rows)}</table>"
                    for name, rows in sections.items())
     legend = "".join(f"<li><b>{escape(k)}</b>: {escape(v)}</li>" for k, v in report["verdicts"].items())
