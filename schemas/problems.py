@@ -10,6 +10,7 @@ INVALID_REQUEST = "/problems/invalid-request"
 NOT_FOUND = "/problems/not-found"
 CONFLICT = "/problems/conflict"
 UNAVAILABLE = "/problems/unavailable"
+TIMEOUT = "/problems/timeout"
 INTERNAL = "/problems/internal-error"
 
 

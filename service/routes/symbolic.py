@@ -13,9 +13,9 @@ from typing import Any
 import sympy as sp
 from fastapi import APIRouter
 
-from schemas.problems import FieldError
+from schemas.problems import TIMEOUT, FieldError
 from schemas.symbolic import BracketVerifyRequest, HamiltonizeRequest
-from service.errors import invalid_request
+from service.errors import ProblemError, invalid_request
 
 router = APIRouter(tags=["symbolic"])
 
@@ -47,31 +47,47 @@ def verify_bracket(request: BracketVerifyRequest) -> dict[str, Any]:
                         for i, row in enumerate(request.matrix)])
     casimirs = {name: _parse(text, symbols, f"casimirs.{name}") for name, text in request.casimirs.items()}
     try:
-        report = verify_user_bracket([symbols[v] for v in request.variables], matrix, casimirs,
-                                     {symbols[k]: v for k, v in request.parameters.items()}, budget_s=request.budget_s)
+        report = _isolated(verify_user_bracket, ([symbols[v] for v in request.variables], matrix, casimirs,
+                                                 {symbols[k]: v for k, v in request.parameters.items()},
+                                                 request.budget_s), request.budget_s)
     except ValueError as exc:
         raise invalid_request([FieldError(field="matrix", reason=str(exc))]) from None
     return {"variables": request.variables, "convention": "matrix[i][j] = {x_i, x_j}", **report}
 
 
-@router.post("/v1/hamiltonize", summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
-def hamiltonize(request: HamiltonizeRequest) -> dict[str, Any]:
+def _isolated(fn: Any, args: tuple[Any, ...], budget_s: float) -> Any:
+    """``fn(*args)`` in a child process (:mod:`service.isolated`): nothing it starts outlives the request."""
+    from service.isolated import GRACE_S, IsolatedTimeout, run_isolated
+
+    try:
+        return run_isolated(fn, args, budget_s + GRACE_S)
+    except IsolatedTimeout as exc:
+        raise ProblemError(408, "Symbolic work timed out", f"{exc}; lower the expressions' size or raise budget_s",
+                           TIMEOUT) from None
+
+
+def _hamiltonize_json(args: tuple[Any, ...], kwargs: dict[str, Any]) -> dict[str, Any]:
+    """Theorem 1 for a user's system, as JSON (runs in the child process)."""
     from nonholonomic.reducing_multiplier import hamiltonize as reduce
 
+    return reduce(*args, **kwargs).to_json()
+
+
+@router.post("/v1/hamiltonize", summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
+def hamiltonize(request: HamiltonizeRequest) -> dict[str, Any]:
     names = request.coordinates + request.velocities + list(request.parameters) + request.symbols
     symbols = _declare(names, "coordinates")
     parsed = {field: _parse(getattr(request, field), symbols, field) for field in ("lagrangian", "a1", "a2", "b")}
     potential = None if request.potential is None else _parse(request.potential, symbols, "potential")
     domain, shift, multiplier = _monopole(request, symbols)
+    args = (parsed["lagrangian"], tuple(symbols[q] for q in request.coordinates),
+            tuple(symbols[v] for v in request.velocities), parsed["a1"], parsed["a2"], parsed["b"], potential,
+            {symbols[k]: v for k, v in request.parameters.items()})
+    kwargs = {"budget_s": request.budget_s, "domain": domain, "shift": shift, "multiplier_symbol": multiplier}
     try:
-        result = reduce(parsed["lagrangian"], tuple(symbols[q] for q in request.coordinates),  # type: ignore[arg-type]
-                        tuple(symbols[v] for v in request.velocities),  # type: ignore[arg-type]
-                        parsed["a1"], parsed["a2"], parsed["b"], potential,
-                        {symbols[k]: v for k, v in request.parameters.items()}, budget_s=request.budget_s,
-                        domain=domain, shift=shift, multiplier_symbol=multiplier)
+        return _isolated(_hamiltonize_json, (args, kwargs), request.budget_s)  # type: ignore[no-any-return]
     except ValueError as exc:
         raise invalid_request([FieldError(field="lagrangian", reason=str(exc))]) from None
-    return result.to_json()
 
 
 #: The name standing for the reducing multiplier N in ``monopole.shift``.

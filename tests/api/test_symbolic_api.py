@@ -124,3 +124,25 @@ def test_bracket_and_euler_angle_checks_pass_on_a_job(client, kind, state):
     assert all(c["passed"] is not False for c in checks), [c for c in checks if c["passed"] is False]
     flow = [c for c in checks if c["name"] == "hamiltonian_flow" and c["method"] == "pointwise"]
     assert flow and flow[0]["residual"] <= 1e-10
+
+
+def test_symbolic_requests_run_in_a_child_process_and_leave_no_threads(client):
+    """A sympy step past its budget cannot be stopped in a thread; in the child it ends with the process."""
+    import threading
+
+    example = client.get("/v1/hamiltonize/examples").json()["examples"]["chaplygin_ball"]
+    before = {t.name for t in threading.enumerate() if t.name.startswith("bounded-")}
+    r = client.post("/v1/hamiltonize", json={**example, "budget_s": 0.5})
+    assert r.status_code == 200, r.text
+    after = {t.name for t in threading.enumerate() if t.name.startswith("bounded-")}
+    assert after <= before  # nothing was started in the API process
+
+
+def test_symbolic_work_past_its_hard_limit_is_a_408(client, monkeypatch):
+    import service.isolated
+
+    monkeypatch.setattr(service.isolated, "GRACE_S", 0.0)
+    example = client.get("/v1/hamiltonize/examples").json()["examples"]["chaplygin_ball"]
+    r = client.post("/v1/hamiltonize", json={**example, "budget_s": 0.3})  # the ball takes about 4 s
+    assert r.status_code == 408 and r.headers["content-type"] == "application/problem+json", r.text
+    assert r.json()["type"] == "/problems/timeout" and "was stopped" in r.json()["detail"]

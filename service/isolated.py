@@ -1,0 +1,69 @@
+"""Run a user's symbolic request in a child process, so that nothing it starts outlives it.
+
+The core bounds each sympy step by a budget (:mod:`nonholonomic.bounded`), but a thread past its
+budget cannot be stopped: in the API process it would keep the interpreter busy until a restart,
+slowing every later request (measured: a runaway ``integrate`` slowed a whole process 5-fold).
+Here the request runs in a process forked from a clean fork server (its modules preloaded, no
+threads); the process ends when the answer is sent, and its leftover threads end with it. If it
+has not answered within the hard limit it is killed.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from collections.abc import Callable
+from multiprocessing.connection import Connection
+from typing import Any
+
+#: Seconds a child may take beyond the request's own symbolic budget (numeric checks, start-up).
+GRACE_S = 30.0
+
+_CONTEXT = multiprocessing.get_context("forkserver")
+_CONTEXT.set_forkserver_preload(["nonholonomic.reducing_multiplier", "nonholonomic.evidence.brackets",
+                                 "service.routes.symbolic"])
+
+
+class IsolatedTimeout(RuntimeError):
+    """The child did not answer within its hard limit and was killed."""
+
+
+def _child(connection: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+    try:
+        connection.send(("ok", fn(*args)))
+    except Exception as exc:  # sent back and re-raised in the parent (ValueError → 422 there)
+        try:
+            connection.send(("error", exc))
+        except Exception:  # an exception that does not pickle
+            connection.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+    finally:
+        connection.close()
+
+
+def run_isolated(fn: Callable[..., Any], args: tuple[Any, ...], limit_s: float) -> Any:
+    """``fn(*args)`` in a child process; its result (picklable), or its exception re-raised.
+
+    Raises
+    ------
+    IsolatedTimeout
+        If no answer came within ``limit_s`` seconds (the child is killed).
+    """
+    receiver, sender = _CONTEXT.Pipe(duplex=False)
+    process = _CONTEXT.Process(target=_child, args=(sender, fn, args), daemon=True, name="symbolic-request")
+    process.start()
+    sender.close()
+    try:
+        if not receiver.poll(limit_s):
+            raise IsolatedTimeout(f"the symbolic work did not finish within {limit_s:g} s and was stopped")
+        try:
+            status, value = receiver.recv()
+        except EOFError:
+            raise RuntimeError(f"the symbolic worker process died (exit code {process.exitcode})") from None
+    finally:
+        receiver.close()
+        process.join(timeout=1.0)
+        if process.is_alive():
+            process.kill()
+            process.join()
+    if status == "error":
+        raise value
+    return value
