@@ -336,6 +336,7 @@ class _Kernels:
     condition_scales: VectorKernel
     constants: VectorKernel
     inverse: VectorKernel | None
+    level_projections: tuple[VectorKernel | None, ...]
 
 
 @lru_cache(maxsize=None)
@@ -359,6 +360,8 @@ def kernels(m: IsomorphismMap) -> _Kernels:
         condition_scales=vectorize([c.scale for c in m.conditions] or [sp.Integer(1)], args),
         constants=vectorize([e for _, e, _ in m.constants] or [sp.Integer(0)], args),
         inverse=inverse,
+        level_projections=tuple(None if c.projection is None else vectorize(c.projection.expression, args)
+                                for c in m.conditions),
     )
 
 
@@ -387,11 +390,10 @@ def project_to_level(m: IsomorphismMap, parameters: np.ndarray, states: np.ndarr
     from nonholonomic.simulation import _vector_slice, project_initial_state
 
     out = np.array([project_initial_state(m.source, parameters, y)[0] for y in states])
-    for cond in m.conditions:
-        if cond.projection is None:
+    for cond, project in zip(m.conditions, kernels(m).level_projections):
+        if cond.projection is None or project is None:
             continue
-        where = _vector_slice(m.source, cond.projection.vector)
-        out[:, where] = vectorize(cond.projection.expression, m.arguments)(out, parameters)
+        out[:, _vector_slice(m.source, cond.projection.vector)] = project(out, parameters)
     return out
 
 
@@ -650,13 +652,14 @@ def map_states(m: IsomorphismMap, parameters: dict[str, object], states: Sequenc
     X = np.array(rows)
     out = apply(m, p, X)
     residual = push_forward_residual(m, p, X)
+    densities = kernels(m).time_density(X, p)[:, 0]
     mapped = []
     for j, x in enumerate(X):
         entry: dict[str, object] = {
             "state": _vectors(m.target, out["states"][j]),
             "target_parameters": _groups(m.target, out["target_parameters"][j]),
             "constants": {n: float(v) for (n, _, _), v in zip(m.constants, out["constants"][j])},
-            "time_density": float(kernels(m).time_density(x[None, :], p)[0, 0]),
+            "time_density": float(densities[j]),
         }
         if project:
             entry["source_state"] = _vectors(m.source, x)

@@ -55,8 +55,9 @@ def run_report(request: dict[str, Any], progress: ProgressCallback | None = None
     from nonholonomic.report import paper_report
 
     job = PaperReportRequest.model_validate(request)
-    if job.problems():
-        raise InvalidJob("; ".join(f"{f}: {r}" for f, r in job.problems()))
+    problems = job.problems()
+    if problems:
+        raise InvalidJob("; ".join(f"{f}: {r}" for f, r in problems))
     report = paper_report(progress, only=job.claims)
     if not report["complete"]:
         raise IntegrationCancelled("the report was cancelled")

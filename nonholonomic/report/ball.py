@@ -26,12 +26,12 @@ from nonholonomic.report.common import (
     D,
     evidence_check,
     integrals_check,
+    map_checks,
     proof,
     run,
     trig_identity,
 )
 from nonholonomic.report.verdict import Check, Claim, Row, claim_id
-from nonholonomic.report.veselova import _map_checks
 from nonholonomic.systems import chaplygin_ball as ball
 from nonholonomic.systems import get_system
 
@@ -39,6 +39,8 @@ GENERAL = "Generalized Chaplygin systems"
 SECTION = "Chaplygin's ball"
 LINEAR = {"inertia": INERTIA, "D": D, "a": A}
 STATE = {"M": [0.5, -0.2, 0.1], "gamma": GAMMA0}
+#: The ball's parameter symbols at the report's values.
+BALL_VALUES = {ball.I1: INERTIA[0], ball.I2: INERTIA[1], ball.I3: INERTIA[2], ball.D: D}
 #: Values for the ball's Euler-angle forms (c the constant of areas).
 VALUES = {lf.I1: INERTIA[0], lf.I2: INERTIA[1], lf.I3: INERTIA[2], ball.D: D, lf.c: 0.35}
 
@@ -93,8 +95,7 @@ def ball_multiplier() -> Row:
                     result.verification.get("method", "pointwise"), str(result.verification.get("detail", ""))[:400])]
     if result.reducing_multiplier is not None:
         rho = ball.measure_density(lf.euler_gamma(sym["theta"], sym["phi"]))
-        own = {ball.I1: INERTIA[0], ball.I2: INERTIA[1], ball.I3: INERTIA[2], ball.D: D}
-        ratio = sp.lambdify((sym["theta"], sym["phi"]), (result.reducing_multiplier / rho).subs({**values, **own}),
+        ratio = sp.lambdify((sym["theta"], sym["phi"]), (result.reducing_multiplier / rho).subs({**values, **BALL_VALUES}),
                             "numpy")
         r = np.array([ratio(t, f) for t, f in np.random.default_rng(0).uniform(0.2, 2.9, (20, 2))], dtype=float)
         spread = float(np.ptp(r) / np.mean(np.abs(r)))
@@ -116,8 +117,7 @@ def monopole() -> Row:
     q = (sym["theta"], sym["phi"])
     zero = monopole_charge(result.S_bar, q, ((0.0, np.pi), (0.0, 2 * np.pi)), {**values, sym["c"]: 0.0},
                            symbolic_budget_s=0)
-    own = {ball.I1: INERTIA[0], ball.I2: INERTIA[1], ball.I3: INERTIA[2], ball.D: D}
-    rho_pole = float(ball.measure_density(sp.Matrix([0, 0, 1])).subs(own))
+    rho_pole = float(ball.measure_density(sp.Matrix([0, 0, 1])).subs(BALL_VALUES))
     k = float(N.subs(values).subs({sym["theta"]: 0, sym["phi"]: 0})) / rho_pole
     expected = -4 * np.pi * 0.35 * k / np.sqrt(np.prod(INERTIA))
     off = abs(charge["integral"] - expected) / abs(expected)
@@ -237,7 +237,7 @@ def theorem_3() -> Row:
     s_printed = sp.diag(*[b ** sp.Rational(-1, 2) for b in Bd]) * g / sp.sqrt(dot(g, sp.diag(*Bd) * g))
     printed = dataclasses.replace(m, forward=tuple(s_printed) + m.forward[3:])
     wrong = iso.push_forward_residual(printed, p, iso.sample_states(m, p, 50))
-    return Row(claim, _map_checks("chaplygin_ball_to_clebsch", {"inertia": INERTIA, "D": D}),
+    return Row(claim, map_checks("chaplygin_ball_to_clebsch", {"inertia": INERTIA, "D": D}),
                printed_check=Check.at_most(wrong, iso.PUSH_FORWARD_TOLERANCE, "pointwise",
                                            f"push-forward residual with the printed B^(-1/2): {wrong:.3g}"))
 

@@ -11,7 +11,10 @@ import numpy as np
 import sympy as sp
 
 from nonholonomic import bounded
+from nonholonomic import isomorphisms as iso
 from nonholonomic.evidence.measure import CheckEvidence
+from nonholonomic.integration import integrate
+from nonholonomic.kernels import parameter_vector
 from nonholonomic.report.verdict import Check
 from nonholonomic.simulation import SimulationResult, simulate
 from nonholonomic.systems import SYSTEMS, get_system
@@ -94,3 +97,19 @@ def trig_identity(expr: sp.Expr, q: tuple[sp.Symbol, ...], values: dict[sp.Symbo
     if method == "symbolic":
         return Check(bool(verdict), 0.0 if verdict else residual, 0.0, method, detail)
     return Check(bool(verdict), residual, 1e-12, method, detail)
+
+
+def map_checks(name: str, parameters: dict[str, Any], potential: str = "zero") -> list[Check]:
+    """A map's push-forward residual at 50 states of its level set and its trajectory (t <= 200)
+    against the target integrated independently."""
+    m = iso.get_map(name, potential)
+    p = parameter_vector(m.source, parameters)
+    X = iso.sample_states(m, p, 50)
+    residual = iso.push_forward_residual(m, p, X)
+    source = integrate(m.source, p, iso.sample_states(m, p, 1, seed=7)[0], 200.0, 201)
+    cmp = iso.compare_trajectories(m, p, source.t, source.tau, source.states)
+    return [Check.at_most(residual, iso.PUSH_FORWARD_TOLERANCE, "pointwise",
+                          f"max relative push-forward residual at 50 random states of the level set: {residual:.2g}"),
+            Check.at_most(cmp.distance, cmp.tolerance, "trajectory",
+                          f"mapped trajectory (t <= 200) vs {m.target.kind} integrated independently in "
+                          f"{m.time_variable}: max distance {cmp.distance:.2g}")]

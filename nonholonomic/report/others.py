@@ -22,11 +22,11 @@ from nonholonomic.report.common import (
     evidence_check,
     example,
     integrals_check,
+    map_checks,
     proof,
     run,
 )
 from nonholonomic.report.verdict import Check, Claim, Row, claim_id
-from nonholonomic.report.veselova import _map_checks
 from nonholonomic.systems import ball_on_quadric as bq
 from nonholonomic.systems import chaplygin_ball as cb
 from nonholonomic.systems import chaplygin_ball_veselova as bv
@@ -85,7 +85,7 @@ def rubber_ball() -> Row:
     claim = Claim(VESELOVA_BALL, "The rubber ball (E = gamma) is Veselova's system with "
                   "I -> J = I + D 1", "rubber-ball paragraph", printed="I_Q omega' = J omega - D (omega', gamma) gamma",
                   corrected="I_Q omega' = J omega' - D (omega', gamma) gamma", errata="ERRATA 10 (a reading)")
-    return Row(claim, _map_checks("rubber_ball_to_veselova", {"inertia": INERTIA, "D": D}))
+    return Row(claim, map_checks("rubber_ball_to_veselova", {"inertia": INERTIA, "D": D}))
 
 
 @claim_id("jacobi.energy")

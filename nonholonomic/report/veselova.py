@@ -24,6 +24,7 @@ from nonholonomic.report.common import (
     A,
     evidence_check,
     integrals_check,
+    map_checks,
     proof,
     run,
     trig_identity,
@@ -192,7 +193,7 @@ def e3_map() -> Row:
     X = iso.sample_states(m, p, 50)
     back = iso.kernels(m).inverse(iso.apply(m, p, X)["states"], p)  # type: ignore[misc]
     err = float(np.max(np.abs(back - X)))
-    return Row(claim, _map_checks("veselova_to_e3", LINEAR, "linear") + [
+    return Row(claim, map_checks("veselova_to_e3", LINEAR, "linear") + [
         Check.at_most(err, 1e-13, "pointwise", f"max |inverse(map(x)) - x| at 50 states: {err:.2g}")])
 
 
@@ -275,21 +276,7 @@ def neumann_theorem() -> Row:
                   "level is the Neumann problem", "theorem after Proposition 1",
                   corrected="s = gamma, L = rho_omega omega, c = 2h / det I, k = +sqrt(det I) in tau",
                   errata="ERRATA 3, 4")
-    return Row(claim, _map_checks("veselova_to_neumann", {"inertia": INERTIA}))
-
-
-def _map_checks(name: str, parameters: dict, potential: str = "zero") -> list[Check]:
-    m = iso.get_map(name, potential)
-    p = parameter_vector(m.source, parameters)
-    X = iso.sample_states(m, p, 50)
-    residual = iso.push_forward_residual(m, p, X)
-    source = integrate(m.source, p, iso.sample_states(m, p, 1, seed=7)[0], 200.0, 201)
-    cmp = iso.compare_trajectories(m, p, source.t, source.tau, source.states)
-    return [Check.at_most(residual, iso.PUSH_FORWARD_TOLERANCE, "pointwise",
-                          f"max relative push-forward residual at 50 random states of the level set: {residual:.2g}"),
-            Check.at_most(cmp.distance, cmp.tolerance, "trajectory",
-                          f"mapped trajectory (t <= 200) vs {m.target.kind} integrated independently in "
-                          f"{m.time_variable}: max distance {cmp.distance:.2g}")]
+    return Row(claim, map_checks("veselova_to_neumann", {"inertia": INERTIA}))
 
 
 ROWS: list[Callable[[], Row]] = [multiplier, integrals, measure, integral_F, gyroscopic_term, theorem_2_multiplier,
