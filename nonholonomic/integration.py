@@ -22,6 +22,7 @@ from scipy.integrate import solve_ivp
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.kernels import numeric
+from nonholonomic.taylor import taylor_system
 
 MACHINE_EPSILON = float(np.finfo(float).eps)
 #: DOP853 cannot honour tolerances much below this.
@@ -88,21 +89,8 @@ class StepRecorder:
 @lru_cache(maxsize=32)
 def heyoka_template(system: MechanicalSystem, tolerance: float) -> hy.taylor_adaptive:
     """Compile the Taylor integrator of ``system`` (state, then τ if any) at ``tolerance``, once per process."""
-    names = [str(s) for s in system.state_symbols] + (["tau"] if system.reduced_time else [])
-    hvars = hy.make_vars(*names)
-    if len(names) == 1:
-        hvars = [hvars]
-    mapping = {s: v for s, v in zip(system.state_symbols, hvars)}
-    mapping.update({s: hy.par[i] for i, s in enumerate(system.parameter_symbols)})
-    rhs = [hy.from_sympy(f, mapping) for f in system.rhs]
-    if system.reduced_time:
-        rhs.append(hy.from_sympy(system.reduced_time.density, mapping))
-    return hy.taylor_adaptive(
-        list(zip(hvars, rhs)),
-        [0.0] * len(hvars),
-        pars=[0.0] * len(system.parameter_symbols),
-        tol=tolerance,
-    )
+    ts = taylor_system(system)
+    return hy.taylor_adaptive(ts.equations, [0.0] * len(ts.variables), pars=[0.0] * ts.n_pars, tol=tolerance)
 
 
 _per_thread = threading.local()
@@ -182,8 +170,9 @@ def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, g
     n = system.dimension
     start = time.perf_counter()
     ta.time = 0.0
-    ta.state[:] = np.append(y0, 0.0) if system.reduced_time else y0
-    ta.pars[:] = p
+    ts = taylor_system(system)
+    ta.state[:] = ts.initial(y0)
+    ta.pars[:] = ts.runtime_parameters(p)
     t_final = grid[-1]
     recorder = StepRecorder()
     recorder.add(0.0, ta.state[:n])

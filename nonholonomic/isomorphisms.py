@@ -34,6 +34,7 @@ from nonholonomic.definition import (
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import VectorKernel, vectorize
+from nonholonomic.initial_state import constraint_problems, initial_state_problems, project_initial_state, vector_slice
 
 #: Relative push-forward residual accepted as round-off.
 PUSH_FORWARD_TOLERANCE = 1e-10
@@ -387,13 +388,12 @@ def condition_violations(m: IsomorphismMap, parameters: np.ndarray, states: np.n
 
 def project_to_level(m: IsomorphismMap, parameters: np.ndarray, states: np.ndarray) -> np.ndarray:
     """``states`` moved onto the source's constraints, then onto the map's level conditions."""
-    from nonholonomic.simulation import _vector_slice, project_initial_state
 
     out = np.array([project_initial_state(m.source, parameters, y)[0] for y in states])
     for cond, project in zip(m.conditions, kernels(m).level_projections):
         if cond.projection is None or project is None:
             continue
-        out[:, _vector_slice(m.source, cond.projection.vector)] = project(out, parameters)
+        out[:, vector_slice(m.source, cond.projection.vector)] = project(out, parameters)
     return out
 
 
@@ -600,7 +600,6 @@ def map_states(m: IsomorphismMap, parameters: dict[str, object], states: Sequenc
         condition, its value and the tolerance are named).
     """
     from nonholonomic.kernels import parameter_vector, state_vector
-    from nonholonomic.simulation import constraint_problems, initial_state_problems, project_initial_state
 
     p = parameter_vector(m.source, dict(parameters))
     problems: list[tuple[str, str]] = []

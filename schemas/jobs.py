@@ -7,7 +7,8 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nonholonomic.integration import SCIPY_MIN_TOLERANCE
-from nonholonomic.simulation import DEFAULT_CHECKS, FieldProblem, available_checks, initial_state_problems
+from nonholonomic.initial_state import FieldProblem, initial_state_problems
+from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
 from schemas.report import PaperReport
 from schemas.settings import get_settings
 from schemas.results import SimulationResultModel

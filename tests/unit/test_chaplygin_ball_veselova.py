@@ -17,7 +17,7 @@ from nonholonomic.definition import InvariantMeasure, cross, dot, symmetric_matr
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
 from nonholonomic.integration import MACHINE_EPSILON, integrate
 from nonholonomic.kernels import numeric, parameter_vector
-from nonholonomic.simulation import initial_state_problems
+from nonholonomic.initial_state import initial_state_problems
 from nonholonomic.systems import chaplygin_ball as cb
 from nonholonomic.systems import chaplygin_ball_veselova as bv
 

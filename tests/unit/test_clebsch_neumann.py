@@ -19,7 +19,7 @@ from nonholonomic.evidence.integrals import integral_evidence
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import parameter_vector
-from nonholonomic.simulation import initial_state_problems
+from nonholonomic.initial_state import initial_state_problems
 from nonholonomic.systems import clebsch as cl
 from nonholonomic.systems import neumann as nm
 

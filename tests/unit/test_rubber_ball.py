@@ -15,7 +15,7 @@ from nonholonomic import simulate
 from nonholonomic.definition import InvariantMeasure, dot, symmetric_matrix_symbols, vector_symbols
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
 from nonholonomic.kernels import numeric, parameter_vector
-from nonholonomic.simulation import initial_state_problems
+from nonholonomic.initial_state import initial_state_problems
 from nonholonomic.systems import chaplygin_ball as cb
 from nonholonomic.systems import chaplygin_ball_veselova as bv
 from nonholonomic.systems import rubber_ball as rb

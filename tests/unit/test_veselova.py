@@ -16,7 +16,7 @@ from nonholonomic.definition import InvariantMeasure, cross, dot, gradient
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import numeric, parameter_vector
-from nonholonomic.simulation import initial_state_problems
+from nonholonomic.initial_state import initial_state_problems
 from nonholonomic.systems import veselova as ves
 
 INERTIA = np.array([2.0, 3.0, 4.5])

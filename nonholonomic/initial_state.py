@@ -1,0 +1,138 @@
+"""The initial state of a simulation: named vectors → the state vector, checked against the system's
+constraints (|γ| = 1, (ω, γ) = 0, the quadric ...) and, on request, projected onto them.
+
+Shared by :mod:`nonholonomic.simulation`, :mod:`nonholonomic.isomorphisms` and the analysis modules
+(it imports none of them, so the core has no import cycle).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nonholonomic.definition import MechanicalSystem
+from nonholonomic.kernels import numeric, parameter_vector, state_vector
+
+
+@dataclass(frozen=True)
+class FieldProblem:
+    """A violation in the input, with the dotted path of the offending field."""
+
+    field: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class ProjectionReport:
+    """What projecting the initial state onto one constraint changed."""
+
+    field: str
+    constraint: str
+    projection: str
+    value_before: float
+    value_after: float
+    change: float
+    """max |component change| of the projected vector"""
+
+
+def vector_slice(system: MechanicalSystem, name: str) -> slice:
+    offset = 0
+    for vec in system.state:
+        if vec.name == name:
+            return slice(offset, offset + len(vec.symbols))
+        offset += len(vec.symbols)
+    raise KeyError(name)
+
+
+def _name_problems(system: MechanicalSystem, initial_state: Mapping[str, Sequence[float]]) -> list[FieldProblem]:
+    problems: list[FieldProblem] = []
+    names = [v.name for v in system.state]
+    alternatives = {a.name: a for a in system.alternative_inputs}
+    allowed = names + list(alternatives)
+    for key in initial_state:
+        if key not in allowed:
+            problems.append(FieldProblem(f"initial_state.{key}",
+                                         f"not a state variable of {system.kind}; expected {', '.join(allowed)}"))
+    for name in names:
+        givers = [name] * (name in initial_state) + [a for a, alt in alternatives.items()
+                                                     if alt.replaces == name and a in initial_state]
+        if not givers:
+            options = " or ".join([name] + [a for a, alt in alternatives.items() if alt.replaces == name])
+            problems.append(FieldProblem(f"initial_state.{name}", f"missing: give {options}"))
+        elif len(givers) > 1:
+            problems.append(FieldProblem(f"initial_state.{givers[1]}",
+                                         f"give only one of {', '.join(givers)}: they describe the same state"))
+    return problems
+
+
+def project_initial_state(system: MechanicalSystem, p: np.ndarray,
+                          y: np.ndarray) -> tuple[np.ndarray, list[ProjectionReport]]:
+    """Move ``y`` onto every constraint that has a projection, in the order the system lists them."""
+    kernels = numeric(system)
+    y = y.copy()
+    reports: list[ProjectionReport] = []
+    for i, (constraint, project) in enumerate(zip(system.constraints, kernels.projections)):
+        if project is None:
+            continue
+        before = float(kernels.constraints(y[None, :], p)[0, i])
+        where = vector_slice(system, constraint.projection.vector)  # type: ignore[union-attr]
+        new = project(y[None, :], p)[0]
+        change = float(np.max(np.abs(new - y[where])))
+        y[where] = new
+        after = float(kernels.constraints(y[None, :], p)[0, i])
+        if change > 0:
+            reports.append(ProjectionReport(f"initial_state.{constraint.field}", constraint.formula,
+                                            constraint.projection.formula, before, after, change))  # type: ignore[union-attr]
+    return y, reports
+
+
+def constraint_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
+    """Constraints ``y`` violates beyond their tolerance."""
+    kernels = numeric(system)
+    with np.errstate(over="ignore", invalid="ignore"):  # huge inputs give inf/nan, reported below
+        values = kernels.constraints(y[None, :], p)[0]
+        scales = kernels.constraint_scales(y[None, :], p)[0]
+    problems = []
+    for constraint, value, scale in zip(system.constraints, values, scales):
+        deviation = float(value - constraint.value)
+        allowed = constraint.tolerance * max(1.0, float(abs(scale)))
+        if not np.isfinite(deviation) or abs(deviation) > allowed:
+            problems.append(FieldProblem(
+                f"initial_state.{constraint.field}",
+                f"violates {constraint.formula} (eq. {constraint.equation}): value {value:.12g}, "
+                f"off by {deviation:.3g} (tolerance {allowed:.3g})"
+                + ("; set project_initial_state to project it" if constraint.projection else "")))
+    return problems
+
+
+def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, object],
+                           initial_state: Mapping[str, Sequence[float]], project: bool = False) -> list[FieldProblem]:
+    """Everything wrong with ``initial_state`` for ``system``: unknown, missing or doubly given
+    vectors, and violated constraints (e.g. |γ| ≠ 1 beyond 1e-9) — after projection if ``project``
+    (a constraint without a projection, or a projection that cannot restore it, still counts).
+    Field paths start with ``initial_state``."""
+    problems = _name_problems(system, initial_state)
+    if problems:
+        return problems
+    p = parameter_vector(system, dict(parameters))
+    y = state_vector(system, dict(initial_state), p)
+    if project:
+        with np.errstate(all="ignore"):
+            y, _ = project_initial_state(system, p, y)
+    return constraint_problems(system, p, y)
+
+
+def parameter_warnings(system: MechanicalSystem, parameters: Mapping[str, object]) -> list[str]:
+    """Physically unrealizable but mathematically admissible parameters (they still run)."""
+    warnings: list[str] = []
+    inertia = parameters.get("inertia")
+    if inertia is not None:
+        i1, i2, i3 = (float(v) for v in inertia)  # type: ignore[union-attr]
+        for a, b, c, names in ((i1, i2, i3, "I1 + I2 >= I3"), (i2, i3, i1, "I2 + I3 >= I1"),
+                               (i3, i1, i2, "I3 + I1 >= I2")):
+            if a + b < c:
+                warnings.append(f"principal moments violate the triangle inequality {names} "
+                                f"({a:g} + {b:g} < {c:g}): no rigid body has them; the equations were integrated anyway")
+    return warnings
