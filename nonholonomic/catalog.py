@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from nonholonomic.analysis.sampling import describe_sampling, fixable
 from nonholonomic.definition import Parameter
 from nonholonomic.isomorphisms import maps_for
 from nonholonomic.simulation import available_checks
@@ -42,7 +43,10 @@ def describe(kind: str) -> dict[str, Any]:
         "equation": base.equation,
         "parameters": [_parameter(p) for p in module.PARAMETERS],
         "potentials": [{"kind": p, "formula": module.POTENTIALS[p].formula,
-                        "parameters": [_parameter(q) for q in module.POTENTIALS[p].parameters]} for p in potentials],
+                        "parameters": [_parameter(q) for q in module.POTENTIALS[p].parameters],
+                        # what an ensemble's {"sample": {"level": {...}}} may fix, and how states are drawn
+                        "levels": list(fixable(definitions[p])), "sampling": describe_sampling(definitions[p])}
+                       for p in potentials],
         "state": [{"name": v.name, "components": [str(s) for s in v.symbols], "meaning": v.meaning, "unit": v.unit}
                   for v in base.state],
         "alternative_inputs": [{"name": a.name, "replaces": a.replaces, "formula": a.formula}

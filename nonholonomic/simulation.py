@@ -4,16 +4,17 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from nonholonomic.analysis.options import SectionOptions, SpectrumOptions
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import IntegralEvidence, integral_evidence
 from nonholonomic.evidence.measure import CheckEvidence, measure_evidence
 from nonholonomic.integration import ProgressCallback, Trajectory, integrate
 from nonholonomic.isomorphisms import isomorphism_evidence, maps_for
 from nonholonomic.initial_state import (
-    FieldProblem,
     ProjectionReport,
     initial_state_problems,
     parameter_warnings,
@@ -22,6 +23,10 @@ from nonholonomic.initial_state import (
 )
 from nonholonomic.kernels import numeric, parameter_vector, state_vector
 from nonholonomic.structure import bracket_evidence, euler_angle_evidence, structural_checks
+
+if TYPE_CHECKING:
+    from nonholonomic.analysis.lyapunov import Spectrum
+    from nonholonomic.analysis.poincare import Section
 
 #: Evidence a simulation can compute (``bracket``, ``euler_angles`` and ``isomorphisms`` only for some kinds, see
 #: :func:`available_checks`); jobs default to :data:`DEFAULT_CHECKS`.
@@ -37,7 +42,8 @@ def available_checks(system: MechanicalSystem) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class SimulationResult:
-    """A trajectory with its evidence. Arrays are at the sample times."""
+    """A trajectory with its evidence. Arrays are at the sample times; ``poincare`` and ``lyapunov``
+    are set when they were asked for."""
 
     system: MechanicalSystem
     parameters: np.ndarray
@@ -47,12 +53,37 @@ class SimulationResult:
     checks: list[CheckEvidence]
     warnings: list[str] = field(default_factory=list)
     projections: list[ProjectionReport] = field(default_factory=list)
+    poincare: Section | None = None
+    lyapunov: Spectrum | None = None
 
     def state(self, name: str) -> np.ndarray:
         """Samples of the state vector ``name`` (shape ``(n, 3)``), or of a derived vector."""
         if name in self.derived:
             return self.derived[name]
         return self.trajectory.states[:, vector_slice(self.system, name)]
+
+
+def phase(progress: ProgressCallback | None, start: float, end: float) -> ProgressCallback | None:
+    """``progress`` for one part of a job that covers the fraction ``[start, end]`` of the whole."""
+    if progress is None:
+        return None
+    return lambda fraction: progress(start + (end - start) * fraction)
+
+
+def evidence(system: MechanicalSystem, p: np.ndarray, trajectory: Trajectory,
+             checks: Sequence[str]) -> tuple[dict[str, np.ndarray], list[IntegralEvidence], list[CheckEvidence]]:
+    """The derived vectors at the samples, the integrals' drift and the checks in ``checks`` for one trajectory."""
+    kernels = numeric(system)
+    derived = {name: fn(trajectory.states, p) for name, fn in kernels.derived.items()}
+    integrals = integral_evidence(system, p, trajectory) if "integrals" in checks else []
+    found = measure_evidence(system, p, trajectory.states) if "measure" in checks else []
+    if "bracket" in checks:
+        found += bracket_evidence(system, p, trajectory.states)
+    if "euler_angles" in checks:
+        found += euler_angle_evidence(system, p, trajectory.states)
+    if "isomorphisms" in checks:
+        found += isomorphism_evidence(system, p, trajectory.t, trajectory.tau, trajectory.states)
+    return derived, integrals, found
 
 
 def simulate(
@@ -67,8 +98,10 @@ def simulate(
     engine: str = "heyoka",
     tolerance: float | None = None,
     progress: ProgressCallback | None = None,
+    poincare: SectionOptions | None = None,
+    lyapunov: SpectrumOptions | None = None,
 ) -> SimulationResult:
-    """Integrate ``system`` and compute the requested evidence.
+    """Integrate ``system`` and compute the requested evidence, section and spectrum.
 
     Parameters
     ----------
@@ -77,6 +110,8 @@ def simulate(
     checks : a subset of :func:`available_checks`.
     project : move the initial state onto the constraints first (reported in ``projections``)
         instead of refusing a state off them.
+    poincare : a Poincaré section of the same orbit over [0, t_final] (heyoka events).
+    lyapunov : the Lyapunov spectrum of the orbit (heyoka variational equations, QR).
 
     Raises
     ------
@@ -94,16 +129,18 @@ def simulate(
     projections: list[ProjectionReport] = []
     if project:
         y0, projections = project_initial_state(system, p, y0)
-    trajectory = integrate(system, p, y0, t_final, samples, engine=engine, tolerance=tolerance, progress=progress)
-    kernels = numeric(system)
-    derived = {name: fn(trajectory.states, p) for name, fn in kernels.derived.items()}
-    integrals = integral_evidence(system, p, trajectory) if "integrals" in checks else []
-    evidence = measure_evidence(system, p, trajectory.states) if "measure" in checks else []
-    if "bracket" in checks:
-        evidence += bracket_evidence(system, p, trajectory.states)
-    if "euler_angles" in checks:
-        evidence += euler_angle_evidence(system, p, trajectory.states)
-    if "isomorphisms" in checks:
-        evidence += isomorphism_evidence(system, p, trajectory.t, trajectory.tau, trajectory.states)
-    return SimulationResult(system, p, trajectory, derived, integrals, evidence,
-                            parameter_warnings(system, parameters), projections)
+    parts = 1 + (poincare is not None) + (lyapunov is not None)
+    trajectory = integrate(system, p, y0, t_final, samples, engine=engine, tolerance=tolerance,
+                           progress=phase(progress, 0.0, 1.0 / parts))
+    section = spectrum = None
+    done = 1
+    if poincare is not None:
+        section = poincare.run(system, p, y0, t_final, tolerance=tolerance,
+                               progress=phase(progress, done / parts, (done + 1) / parts))
+        done += 1
+    if lyapunov is not None:
+        spectrum = lyapunov.run(system, p, y0, t_final, tolerance=tolerance,
+                                progress=phase(progress, done / parts, 1.0))
+    derived, integrals, found = evidence(system, p, trajectory, checks)
+    return SimulationResult(system, p, trajectory, derived, integrals, found,
+                            parameter_warnings(system, parameters), projections, section, spectrum)

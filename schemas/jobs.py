@@ -9,6 +9,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from nonholonomic.integration import SCIPY_MIN_TOLERANCE
 from nonholonomic.initial_state import FieldProblem, initial_state_problems
 from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
+from nonholonomic.definition import MechanicalSystem
+from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.report import PaperReport
 from schemas.settings import get_settings
 from schemas.results import SimulationResultModel
@@ -58,6 +60,9 @@ class JobRequest(BaseModel):
     project_initial_state: bool = Field(
         False, description="move an initial state that is off a constraint (|gamma| = 1, (omega, gamma) = 0, "
                            "the quadric ...) onto it, and report what changed, instead of refusing it")
+    poincare: PoincareRequest | None = Field(None, description="a Poincare section of the orbit (heyoka events)")
+    lyapunov: LyapunovRequest | None = Field(None, description="the Lyapunov spectrum of the orbit (heyoka "
+                                                               "variational equations, QR)")
 
     @field_validator("t_final")
     @classmethod
@@ -83,11 +88,26 @@ class JobRequest(BaseModel):
                  for i, check in enumerate(self.checks) if check not in available_checks(system)]
         found += initial_state_problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
                                         self.initial_state, self.project_initial_state)
-        tol = self.integrator.tolerance
-        if self.integrator.engine == "scipy" and tol is not None and tol < SCIPY_MIN_TOLERANCE:
-            found.append(FieldProblem("integrator.tolerance",
-                                      f"scipy DOP853 cannot honour {tol:g}; use >= {SCIPY_MIN_TOLERANCE:g} or heyoka"))
+        found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov)
         return found
+
+
+def analysis_problems(system: MechanicalSystem, integrator: IntegratorOptions, t_final: float,
+                      poincare: PoincareRequest | None, lyapunov: LyapunovRequest | None) -> list[FieldProblem]:
+    """The integrator's tolerance range and the analysis blocks, checked against the system."""
+    found = []
+    tol = integrator.tolerance
+    if integrator.engine == "scipy" and tol is not None and tol < SCIPY_MIN_TOLERANCE:
+        found.append(FieldProblem("integrator.tolerance",
+                                  f"scipy DOP853 cannot honour {tol:g}; use >= {SCIPY_MIN_TOLERANCE:g} or heyoka"))
+    if integrator.engine != "heyoka" and (poincare or lyapunov):
+        found.append(FieldProblem("integrator.engine", "poincare and lyapunov need heyoka (events and variational "
+                                                       "equations)"))
+    if poincare is not None:
+        found += poincare.problems(system)
+    if lyapunov is not None:
+        found += lyapunov.problems(system, t_final)
+    return found
 
 
 class JobAccepted(BaseModel):

@@ -7,7 +7,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from nonholonomic.analysis.ensemble import MemberResult
 from nonholonomic.simulation import SimulationResult
+from schemas.analysis import section_to_json, spectrum_to_json
 
 
 class IntegralItem(BaseModel):
@@ -96,6 +98,8 @@ class SimulationResultModel(BaseModel):
     checks: list[CheckItem]
     integration: IntegrationInfo
     warnings: list[str]
+    poincare: dict[str, Any] | None = Field(None, description="the Poincare section, when asked for")
+    lyapunov: dict[str, Any] | None = Field(None, description="the Lyapunov spectrum, when asked for")
 
 
 def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict[str, Any]:
@@ -127,4 +131,21 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
         "integration": {"engine": traj.engine, "tolerance": traj.tolerance, "steps": traj.steps,
                         "wall_time_s": traj.wall_time_s, "versions": traj.versions},
         "warnings": list(result.warnings),
+        "poincare": None if result.poincare is None else section_to_json(result.poincare),
+        "lyapunov": None if result.lyapunov is None else spectrum_to_json(result.lyapunov),
     }
+
+
+def member_to_json(member: MemberResult) -> dict[str, Any]:
+    """One ensemble member as JSON: its index, label, initial state, status, and (when it succeeded)
+    the same result fields as a job without the ``system`` block the members share."""
+    out: dict[str, Any] = {"index": member.index, "status": member.status, **({"label": dict(member.label)}
+                                                                              if member.label else {})}
+    if member.result is None:
+        out["error"] = member.error
+        out["initial_state"] = member.initial_state.tolist()
+        return out
+    body = result_to_json(member.result, {})
+    del body["system"]
+    out.update(body)
+    return out

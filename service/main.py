@@ -14,7 +14,7 @@ import nonholonomic
 from schemas.settings import Settings, get_settings
 from service.backends import make_backend
 from service.errors import install_error_handlers
-from service.routes import health, jobs, maps, report, symbolic, systems
+from service.routes import ensembles, health, jobs, maps, report, symbolic, systems
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -39,6 +39,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(systems.router)
     app.include_router(jobs.router)
+    app.include_router(ensembles.router)
     app.include_router(symbolic.router)
     app.include_router(maps.router)
     app.include_router(report.router)

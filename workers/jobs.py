@@ -41,7 +41,10 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
     parameters = job.system.parameter_values()
     result = simulate(
         system, parameters, job.initial_state, job.t_final, job.samples,
-        checks=job.checks, project=job.project_initial_state, engine=job.integrator.engine, tolerance=job.integrator.tolerance, progress=progress,
+        checks=job.checks, project=job.project_initial_state, engine=job.integrator.engine,
+        tolerance=job.integrator.tolerance, progress=progress,
+        poincare=job.poincare.options() if job.poincare else None,
+        lyapunov=job.lyapunov.options() if job.lyapunov else None,
     )
     return result_to_json(result, parameters)
 

@@ -13,6 +13,7 @@ from celery.exceptions import Ignore, SoftTimeLimitExceeded
 from nonholonomic.integration import IntegrationCancelled
 from schemas.settings import get_settings
 from workers.celery_app import DEFAULT_REDIS_URL, app
+from workers.ensembles import RedisEnsembleStore, run_ensemble_chunk
 from workers.jobs import run_job
 from workers.registry import RedisJobRegistry
 
@@ -61,3 +62,16 @@ def simulate_job(self: Task, request: dict[str, Any]) -> dict[str, Any]:
         raise Ignore() from None
     except SoftTimeLimitExceeded:
         raise JobTimeout(f"the job exceeded its time limit of {get_settings().job_soft_time_limit_s:g} s") from None
+
+
+@lru_cache(maxsize=1)
+def _ensemble_store() -> RedisEnsembleStore:
+    settings = get_settings()
+    return RedisEnsembleStore(redis.Redis.from_url(settings.redis_url or DEFAULT_REDIS_URL), settings.job_ttl_s)
+
+
+@app.task(bind=True, name="nonholonomic.ensemble_chunk")
+def ensemble_chunk(self: Task, ensemble_id: str, chunk: int) -> str:
+    """Run one chunk of an ensemble (:func:`workers.ensembles.run_ensemble_chunk`); the results go to
+    the ensemble's record, the task's own result is only what happened (``done``, ``cancelled`` ...)."""
+    return run_ensemble_chunk(_ensemble_store(), ensemble_id, chunk, self.request.hostname or "worker")

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from workers.ensembles import EnsembleStore
+
 
 @dataclass
 class JobRecord:
@@ -22,6 +24,8 @@ class JobRecord:
 
 class JobBackend(Protocol):
     mode: str
+    #: Where ensembles' records and member results live.
+    ensembles: EnsembleStore
 
     def submit(self, request: dict[str, Any]) -> JobRecord:
         """Accept a validated request; returns the queued job."""
@@ -31,6 +35,12 @@ class JobBackend(Protocol):
 
     def cancel(self, job_id: str) -> JobRecord | None:
         """Ask the job to stop; returns it (None if unknown)."""
+
+    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]]) -> tuple[str, str]:
+        """Record a validated ensemble and send its chunks to the workers; returns (id, created_at)."""
+
+    def cancel_ensemble(self, ensemble_id: str) -> None:
+        """Stop every chunk: queued ones never start, running ones stop at their next progress report."""
 
     def health(self) -> dict[str, Any]:
         """Status of the parts this backend depends on; ``ok`` is False if jobs cannot run."""

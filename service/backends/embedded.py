@@ -14,6 +14,7 @@ from nonholonomic.integration import IntegrationCancelled
 from schemas.jobs import TERMINAL_STATUSES
 from schemas.settings import Settings
 from service.backends.base import JobRecord
+from workers.ensembles import MemoryEnsembleStore, run_ensemble_chunk
 from workers.jobs import run_job, warm_up
 
 
@@ -31,6 +32,7 @@ class EmbeddedBackend:
         self._ttl_s = settings.job_ttl_s
         self._threads = settings.embedded_workers
         self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="nonholonomic-job")
+        self.ensembles = MemoryEnsembleStore()
         self._warm = threading.Event()
         if settings.warm_up:  # in its own thread, so the first jobs need not wait behind it
             threading.Thread(target=self._warm_up, daemon=True, name="nonholonomic-warm-up").start()
@@ -84,6 +86,16 @@ class EmbeddedBackend:
             with self._lock:
                 if not cancelled.is_set():
                     record.result, record.progress, record.status = result, 1.0, "succeeded"
+
+    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]]) -> tuple[str, str]:
+        ensemble_id = str(uuid.uuid4())
+        created_at = self.ensembles.create(ensemble_id, request, chunks)
+        for chunk in range(len(chunks)):
+            self._pool.submit(run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded")
+        return ensemble_id, created_at
+
+    def cancel_ensemble(self, ensemble_id: str) -> None:
+        self.ensembles.cancel(ensemble_id)
 
     def get(self, job_id: str) -> JobRecord | None:
         return self._jobs.get(job_id)

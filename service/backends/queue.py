@@ -7,6 +7,7 @@ import uuid
 from typing import Any
 
 import redis
+from celery import group
 from celery.result import AsyncResult
 
 from schemas.jobs import TERMINAL_STATUSES
@@ -14,7 +15,8 @@ from schemas.settings import Settings
 from service.backends.base import JobRecord
 from workers.celery_app import app as celery_app
 from workers.registry import RedisJobRegistry
-from workers.tasks import simulate_job
+from workers.ensembles import RedisEnsembleStore
+from workers.tasks import ensemble_chunk, simulate_job
 
 #: Celery task state → job status.
 #: Seconds a census of the workers stays valid (asking them takes a full inspect timeout).
@@ -22,6 +24,10 @@ WORKER_CENSUS_TTL_S = 5.0
 
 _STATUS = {"PENDING": "queued", "RECEIVED": "queued", "RETRY": "queued", "STARTED": "running",
            "PROGRESS": "running", "SUCCESS": "succeeded", "FAILURE": "failed", "REVOKED": "cancelled"}
+
+
+def _chunk_task_id(ensemble_id: str, chunk: int) -> str:
+    return f"{ensemble_id}.chunk-{chunk}"
 
 
 class QueueBackend:
@@ -33,6 +39,7 @@ class QueueBackend:
         self.settings = settings
         self.redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=5)
         self.registry = RedisJobRegistry(self.redis, settings.job_ttl_s)
+        self.ensembles = RedisEnsembleStore(self.redis, settings.job_ttl_s)
         self._census: tuple[float, dict[str, list[str]]] = (-float("inf"), {})
 
     def submit(self, request: dict[str, Any]) -> JobRecord:
@@ -68,6 +75,20 @@ class QueueBackend:
         celery_app.control.revoke(job_id)  # a queued job is dropped by the worker that receives it
         record.status = "cancelled"
         return record
+
+    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]]) -> tuple[str, str]:
+        ensemble_id = str(uuid.uuid4())
+        created_at = self.ensembles.create(ensemble_id, request, chunks)
+        group(ensemble_chunk.si(ensemble_id, i).set(task_id=_chunk_task_id(ensemble_id, i), queue=self.settings.queue)
+              for i in range(len(chunks))).apply_async()
+        return ensemble_id, created_at
+
+    def cancel_ensemble(self, ensemble_id: str) -> None:
+        record = self.ensembles.record(ensemble_id)
+        self.ensembles.cancel(ensemble_id)  # running chunks see it within their progress interval
+        if record is not None:  # queued chunks are dropped by the worker that receives them
+            celery_app.control.revoke([_chunk_task_id(ensemble_id, i) for i in range(len(record["chunks"]))
+                                       if i not in record["done"]])
 
     def health(self) -> dict[str, Any]:
         try:

@@ -1,0 +1,210 @@
+"""Ensembles: many orbits of one system, cut into chunks that workers run independently.
+
+:func:`plan` cuts the members into contiguous chunks of about one second of work;
+:func:`run_chunk` integrates one chunk's members together (heyoka's batch mode: one SIMD lane per
+member, each lane with its own parameters), with the same evidence, section and spectrum as a
+single job; :func:`digest` keeps what the ensemble's summary needs of each member and
+:func:`summarize` reduces the digests. Pure computation: the workers only move chunks and results.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from nonholonomic.analysis.options import SectionOptions, SpectrumOptions
+from nonholonomic.definition import MechanicalSystem
+from nonholonomic.initial_state import parameter_warnings
+from nonholonomic import integration
+from nonholonomic.integration import ProgressCallback
+from nonholonomic.simulation import SimulationResult, evidence, phase
+
+#: Seconds of work one chunk aims at (the default ``chunk_size``).
+CHUNK_SECONDS = 1.0
+#: Estimated seconds per member and unit of physical time (the ball's batch rate, measured in
+#: bench/bench_ensemble.py, ~3500 trajectories of t = 100 per second), before the factors below.
+SECONDS_PER_UNIT_TIME = 3e-6
+#: Cost factors: a section adds an event to every step; the variational equations of an
+#: n-dimensional system integrate n + n·count variables.
+SECTION_FACTOR = 1.5
+MAX_CHUNK_SIZE = 4096
+
+
+@dataclass(frozen=True)
+class Member:
+    """One member: its parameters and initial state (system order) and what sets it apart (``label``:
+    e.g. ``{"parameter": "D", "value": 0.5}`` in a sweep, ``{}`` otherwise)."""
+
+    index: int
+    parameters: np.ndarray
+    initial_state: np.ndarray
+    label: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """Members ``start .. stop − 1`` of an ensemble."""
+
+    index: int
+    start: int
+    stop: int
+
+    @property
+    def size(self) -> int:
+        return self.stop - self.start
+
+
+@dataclass(frozen=True)
+class MemberResult:
+    """One member's outcome: ``result`` when it succeeded, ``error`` (the reason) when it failed."""
+
+    index: int
+    label: Mapping[str, Any]
+    parameters: np.ndarray
+    initial_state: np.ndarray
+    result: SimulationResult | None = None
+    error: str | None = None
+
+    @property
+    def status(self) -> str:
+        return "succeeded" if self.result is not None else "failed"
+
+
+def default_chunk_size(system: MechanicalSystem, t_final: float, *, poincare: SectionOptions | None = None,
+                       lyapunov: SpectrumOptions | None = None, lanes: int = 4) -> int:
+    """Members per chunk for about :data:`CHUNK_SECONDS` of work, a multiple of ``lanes`` (the SIMD batch)."""
+    cost = SECONDS_PER_UNIT_TIME * max(t_final, 1e-9) * (system.dimension / 6) ** 2
+    if poincare is not None:
+        cost *= SECTION_FACTOR
+    if lyapunov is not None:
+        count = lyapunov.count or system.dimension
+        cost *= 2 + (1 + count)  # the trajectory, and the orbit with its tangent vectors
+    size = int(CHUNK_SECONDS / cost)
+    return max(lanes, min(MAX_CHUNK_SIZE, size - size % lanes))
+
+
+def plan(count: int, chunk_size: int) -> list[Chunk]:
+    """Cut ``count`` members into contiguous chunks of ``chunk_size`` (the last one may be smaller).
+
+    Raises
+    ------
+    ValueError
+        If ``count`` or ``chunk_size`` is below 1.
+    """
+    if count < 1 or chunk_size < 1:
+        raise ValueError(f"need count >= 1 and chunk_size >= 1, got {count} and {chunk_size}")
+    return [Chunk(i, start, min(start + chunk_size, count))
+            for i, start in enumerate(range(0, count, chunk_size))]
+
+
+def run_chunk(system: MechanicalSystem, members: Sequence[Member], t_final: float, samples: int, *,
+              checks: Sequence[str] = ("integrals",), poincare: SectionOptions | None = None,
+              lyapunov: SpectrumOptions | None = None, tolerance: float | None = None,
+              parameter_groups: Mapping[str, object] | None = None,
+              progress: ProgressCallback | None = None) -> list[MemberResult]:
+    """Integrate ``members`` together (batch mode) and collect each one's evidence.
+
+    A member whose integration fails (e.g. a blow-up) is a failed :class:`MemberResult` with the
+    reason; the others are unaffected.
+
+    Parameters
+    ----------
+    checks : evidence per member (``integrals``, ``measure``), as for :func:`~nonholonomic.simulation.simulate`.
+    parameter_groups : the named parameter groups (for the warnings of unrealizable moments); members
+        of a sweep differ in one of them, so the warnings are computed from each member's own vector.
+    progress : ``progress(fraction) -> keep_going`` over the whole chunk; False cancels
+        (:class:`~nonholonomic.integration.IntegrationCancelled` is raised).
+    """
+    if not members:
+        return []
+    P = np.array([m.parameters for m in members], dtype=float)
+    Y0 = np.array([m.initial_state for m in members], dtype=float)
+    parts = 1 + (poincare is not None) + (lyapunov is not None)
+    trajectories = integration.integrate_batch(system, P, Y0, t_final, samples, tolerance=tolerance,
+                                   progress=phase(progress, 0.0, 1.0 / parts))
+    done = 1
+    sections: list[Any] = [None] * len(members)
+    spectra: list[Any] = [None] * len(members)
+    if poincare is not None:
+        sections = poincare.run_batch(system, P, Y0, t_final, tolerance=tolerance,
+                                      progress=phase(progress, done / parts, (done + 1) / parts))
+        done += 1
+    if lyapunov is not None:
+        spectra = lyapunov.run_batch(system, P, Y0, t_final, tolerance=tolerance,
+                                     progress=phase(progress, done / parts, 1.0))
+    out = []
+    for member, trajectory, section, spectrum in zip(members, trajectories, sections, spectra):
+        failure = next((x for x in (trajectory, section, spectrum) if isinstance(x, Exception)), None)
+        if failure is not None:
+            out.append(MemberResult(member.index, member.label, member.parameters, member.initial_state,
+                                    error=f"{type(failure).__name__}: {failure}"))
+            continue
+        derived, integrals, found = evidence(system, member.parameters, trajectory, checks)
+        warnings = parameter_warnings(system, _groups(system, member.parameters, parameter_groups))
+        result = SimulationResult(system, member.parameters, trajectory, derived, integrals, found, warnings,
+                                  [], section, spectrum)
+        out.append(MemberResult(member.index, member.label, member.parameters, member.initial_state, result))
+    return out
+
+
+def _groups(system: MechanicalSystem, p: np.ndarray, given: Mapping[str, object] | None) -> dict[str, object]:
+    """The named groups of a member's parameter vector (only ``inertia`` matters for the warnings)."""
+    groups: dict[str, object] = dict(given or {})
+    offset = 0
+    for par in system.parameters:
+        if par.name == "inertia":
+            groups["inertia"] = p[offset:offset + 3].tolist()
+        offset += len(par.symbols)
+    return groups
+
+
+def digest(member: MemberResult) -> dict[str, Any]:
+    """What the ensemble's summary needs of one member: status, worst integral drifts, failed checks,
+    the largest Lyapunov exponent and the number of section points."""
+    out: dict[str, Any] = {"index": member.index, "status": member.status}
+    if member.result is None:
+        out["error"] = member.error
+        return out
+    r = member.result
+    out["integral_drift"] = {i.name: i.max_rel_drift for i in r.integrals}
+    out["checks_failed"] = [c.name for c in r.checks if c.passed is False] + [
+        i.name for i in r.integrals if not i.passed]
+    if r.lyapunov is not None:
+        out["largest_exponent"] = float(r.lyapunov.exponents[0])
+    if r.poincare is not None:
+        out["section_points"] = r.poincare.count
+    if member.label:
+        out["label"] = dict(member.label)
+    return out
+
+
+def summarize(digests: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Reduce member digests: counts, the worst drift of each integral, failed checks, statistics of
+    the largest exponents, the section's points."""
+    ok = [d for d in digests if d["status"] == "succeeded"]
+    failed = [d for d in digests if d["status"] != "succeeded"]
+    worst: dict[str, float] = {}
+    for d in ok:
+        for name, drift in d.get("integral_drift", {}).items():
+            worst[name] = max(worst.get(name, 0.0), drift) if math.isfinite(drift) else math.inf
+    summary: dict[str, Any] = {
+        "members": len(digests), "succeeded": len(ok), "failed": len(failed),
+        "failures": [{"index": d["index"], "error": d.get("error")} for d in failed[:20]],
+        "worst_integral_drift": worst,
+        "members_with_failed_checks": sum(1 for d in ok if d.get("checks_failed")),
+    }
+    exponents = np.array([d["largest_exponent"] for d in ok if "largest_exponent" in d], dtype=float)
+    if exponents.size:
+        summary["largest_exponent"] = {
+            "count": int(exponents.size), "min": float(exponents.min()), "median": float(np.median(exponents)),
+            "mean": float(exponents.mean()), "max": float(exponents.max()),
+            "quartiles": [float(q) for q in np.quantile(exponents, [0.25, 0.5, 0.75])]}
+    points = [d["section_points"] for d in ok if "section_points" in d]
+    if points:
+        summary["section_points"] = {"total": int(sum(points)), "min_per_member": int(min(points)),
+                                     "max_per_member": int(max(points))}
+    return summary

@@ -1,0 +1,88 @@
+"""What a job or an ensemble asks of the analysis: a Poincaré section, a Lyapunov spectrum.
+
+Plain values (the schemas build them from a request); ``run`` calls the analysis module on one
+orbit, ``run_batch`` on the members of an ensemble chunk.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from nonholonomic.definition import MechanicalSystem
+from nonholonomic.integration import IntegrationError, ProgressCallback
+
+if TYPE_CHECKING:
+    from nonholonomic.analysis.lyapunov import Spectrum
+    from nonholonomic.analysis.poincare import Section
+
+
+@dataclass(frozen=True)
+class SectionOptions:
+    """A Poincaré section ``surface(x) = value`` crossed in ``direction`` (see :mod:`.poincare`)."""
+
+    surface: str
+    value: float = 0.0
+    direction: str = "increasing"
+    coordinates: tuple[str, str] | None = None
+    max_points: int = 10_000
+
+    def _keywords(self) -> dict[str, object]:
+        keywords: dict[str, object] = {"value": self.value, "direction": self.direction,
+                                       "max_points": self.max_points}
+        if self.coordinates is not None:
+            keywords["coordinates"] = tuple(self.coordinates)
+        return keywords
+
+    def run(self, system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, t_final: float, *,
+            tolerance: float | None = None, progress: ProgressCallback | None = None) -> Section:
+        from nonholonomic.analysis.poincare import section
+
+        return section(system, p, y0, t_final, self.surface, tolerance=tolerance, progress=progress,
+                       **self._keywords())  # type: ignore[arg-type]
+
+    def run_batch(self, system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, t_final: float, *,
+                  tolerance: float | None = None,
+                  progress: ProgressCallback | None = None) -> list[Section | IntegrationError]:
+        from nonholonomic.analysis.poincare import section_batch
+
+        return section_batch(system, P, Y0, t_final, self.surface, tolerance=tolerance, progress=progress,
+                             **self._keywords())  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class SpectrumOptions:
+    """``count`` Lyapunov exponents (all by default), QR every ``interval``, averaging after ``transient``."""
+
+    count: int | None = None
+    interval: float = 1.0
+    transient: float = 0.0
+
+    def run(self, system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, t_final: float, *,
+            tolerance: float | None = None, progress: ProgressCallback | None = None) -> Spectrum:
+        from nonholonomic.analysis.lyapunov import spectrum
+
+        return spectrum(system, p, y0, t_final, count=self.count, interval=self.interval,
+                        transient=self.transient, tolerance=tolerance, progress=progress)
+
+    def run_batch(self, system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, t_final: float, *,
+                  tolerance: float | None = None,
+                  progress: ProgressCallback | None = None) -> list[Spectrum | IntegrationError]:
+        """Every member's spectrum: the largest exponents in batch mode when ``count`` is 1, else one by one."""
+        from nonholonomic.analysis.lyapunov import largest_batch, spectrum
+
+        if self.count == 1:
+            return largest_batch(system, P, Y0, t_final, interval=self.interval, transient=self.transient,
+                                 tolerance=tolerance, progress=progress)
+        out: list[Spectrum | IntegrationError] = []
+        for i, (p, y0) in enumerate(zip(P, Y0)):
+            member_progress = None if progress is None else (
+                lambda f, i=i: progress((i + f) / len(P)))  # type: ignore[misc]
+            try:
+                out.append(spectrum(system, p, y0, t_final, count=self.count, interval=self.interval,
+                                    transient=self.transient, tolerance=tolerance, progress=member_progress))
+            except IntegrationError as exc:
+                out.append(exc)
+        return out

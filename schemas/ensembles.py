@@ -1,0 +1,277 @@
+"""Ensemble requests (``POST /v1/ensembles``): one system, many members, the same evidence for each.
+
+Members come from an explicit list of initial states, from ``sample`` (states on a level set of the
+kind's integrals, drawn with a seed) or from a one-parameter ``sweep``. :meth:`EnsembleRequest.members`
+turns the request into the core's :class:`~nonholonomic.analysis.ensemble.Member` list, the same in the
+API (validation) and in every worker (each chunk rebuilds it), so a chunk needs only its range.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from nonholonomic.analysis.ensemble import Member, default_chunk_size, plan
+from nonholonomic.definition import MechanicalSystem, Parameter
+from nonholonomic.initial_state import FieldProblem, initial_state_problems, project_initial_state
+from nonholonomic.kernels import parameter_vector, state_vector
+from schemas.analysis import LyapunovRequest, PoincareRequest
+from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems
+from schemas.settings import get_settings
+from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
+
+ENSEMBLE_JOB = "ensemble"
+#: Lanes of heyoka's batch mode a chunk size is rounded to.
+BATCH_LANES = 4
+_PATH = re.compile(r"^(?:potential\.)?([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
+
+
+class SampleMembers(BaseModel):
+    """``count`` states on one level set of the kind's integrals (the catalog's ``levels`` lists what
+    each kind can fix), drawn with ``seed``: the same seed gives the same states."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    count: int = Field(ge=1, description="number of members")
+    seed: int = Field(0, ge=0, le=2**63 - 1, description="seed of numpy's default generator")
+    level: dict[str, FiniteFloat] = Field(description="integral name -> value, e.g. {'energy': 1.0, 'area': 0.0}")
+
+
+class SweepMembers(BaseModel):
+    """One member per value of one parameter, all from the same initial state."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    parameter: str = Field(description="parameter path: 'D', 'inertia[1]', 'potential.a[2]'")
+    values: list[FiniteFloat] = Field(min_length=1)
+    initial_state: dict[str, Vec3]
+
+
+class MembersSpec(BaseModel):
+    """Exactly one of ``initial_states``, ``sample``, ``sweep``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    initial_states: list[dict[str, Vec3]] | None = Field(None, min_length=1)
+    sample: SampleMembers | None = None
+    sweep: SweepMembers | None = None
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> MembersSpec:
+        given = [k for k in ("initial_states", "sample", "sweep") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(f"give exactly one of initial_states, sample, sweep (got {', '.join(given) or 'none'})")
+        return self
+
+    @property
+    def count(self) -> int:
+        if self.initial_states is not None:
+            return len(self.initial_states)
+        if self.sample is not None:
+            return self.sample.count
+        return len(self.sweep.values)  # type: ignore[union-attr]
+
+
+class EnsembleRequest(BaseModel):
+    """Many orbits of one system, with the same evidence, section and spectrum for each member."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [{
+        "system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+        "members": {"sample": {"count": 64, "seed": 1, "level": {"energy": 1.0, "area": 0.0}}},
+        "t_final": 500.0, "samples": 2,
+        "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "gamma2"]},
+        "lyapunov": {"count": 1}}]})
+
+    system: AnySystemSpec
+    members: MembersSpec
+    t_final: FiniteFloat = Field(gt=0, description="end of each member's integration [s]")
+    samples: int = Field(2, ge=2, description="sample times per member (both ends included)")
+    checks: list[Literal["integrals", "measure"]] = Field(
+        default_factory=lambda: ["integrals"], description="evidence per member")
+    poincare: PoincareRequest | None = None
+    lyapunov: LyapunovRequest | None = None
+    integrator: IntegratorOptions = Field(default_factory=IntegratorOptions)
+    project_initial_state: bool = Field(False, description="project each member's state onto the constraints")
+    chunk_size: int | None = Field(None, ge=1, description="members per chunk (default: about one second of work)")
+
+    @field_validator("t_final")
+    @classmethod
+    def _t_final_limit(cls, v: float) -> float:
+        limit = get_settings().max_t_final
+        if v > limit:
+            raise ValueError(f"t_final = {v:g} exceeds this service's maximum {limit:g}")
+        return v
+
+    def definition(self) -> MechanicalSystem:
+        return self.system.definition()  # type: ignore[attr-defined]
+
+    def effective_chunk_size(self) -> int:
+        system = self.definition()
+        return self.chunk_size or default_chunk_size(
+            system, self.t_final, poincare=self.poincare.options() if self.poincare else None,
+            lyapunov=self.lyapunov.options() if self.lyapunov else None, lanes=BATCH_LANES)
+
+    def chunks(self) -> list[tuple[int, int]]:
+        """``(start, stop)`` of every chunk."""
+        return [(c.start, c.stop) for c in plan(self.members.count, self.effective_chunk_size())]
+
+    def problems(self) -> list[FieldProblem]:
+        """Everything wrong with the request, each member's state included, before anything is queued."""
+        settings = get_settings()
+        system = self.definition()
+        count = self.members.count
+        found: list[FieldProblem] = []
+        if count > settings.max_ensemble_members:
+            found.append(FieldProblem("members", f"{count} members exceed this service's maximum "
+                                                  f"{settings.max_ensemble_members}"))
+        if count * self.samples > settings.max_ensemble_values:
+            found.append(FieldProblem("samples", f"members x samples = {count} x {self.samples} = "
+                                                 f"{count * self.samples} exceeds this service's maximum "
+                                                 f"{settings.max_ensemble_values}; ask for fewer samples"))
+        found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov)
+        if found:
+            return found
+        return self._member_problems(system)
+
+    def _member_problems(self, system: MechanicalSystem) -> list[FieldProblem]:
+        parameters = self.system.parameter_values()  # type: ignore[attr-defined]
+        project = self.project_initial_state
+        spec = self.members
+        found: list[FieldProblem] = []
+        if spec.initial_states is not None:
+            for i, state in enumerate(spec.initial_states):
+                for p in initial_state_problems(system, parameters, state, project):
+                    found.append(FieldProblem(p.field.replace("initial_state", f"members.initial_states[{i}]", 1),
+                                              p.reason))
+                if len(found) >= 20:
+                    break
+        elif spec.sweep is not None:
+            try:
+                group, index = _sweep_target(system, spec.sweep.parameter)
+            except ValueError as exc:
+                return [FieldProblem("members.sweep.parameter", str(exc))]
+            for i, value in enumerate(spec.sweep.values):
+                values = _swept(parameters, group, index, value)
+                try:
+                    parameter_vector(system, values)
+                except ValueError as exc:
+                    found.append(FieldProblem(f"members.sweep.values[{i}]", str(exc)))
+                    continue
+                for p in initial_state_problems(system, values, spec.sweep.initial_state, project):
+                    found.append(FieldProblem(p.field.replace("initial_state", "members.sweep.initial_state", 1),
+                                              f"{p.reason} (with {spec.sweep.parameter} = {value:g})"))
+                if len(found) >= 20:
+                    break
+        else:
+            try:
+                self.members_list(0, spec.count)
+            except LevelProblem as exc:
+                found.append(FieldProblem(exc.field, exc.reason))
+        return found
+
+    def members_list(self, start: int = 0, stop: int | None = None) -> list[Member]:
+        """Members ``start .. stop − 1`` (all by default) as the core's :class:`Member` objects.
+
+        Sampled members are drawn in order with the seed (a shorter draw is a prefix of a longer one),
+        so any chunk gets the same states as the whole ensemble would.
+
+        Raises
+        ------
+        LevelProblem
+            If the level set cannot be sampled (names it cannot fix, an unreachable level).
+        """
+        system = self.definition()
+        parameters = self.system.parameter_values()  # type: ignore[attr-defined]
+        spec = self.members
+        stop = spec.count if stop is None else stop
+        p = parameter_vector(system, parameters)
+        if spec.initial_states is not None:
+            return [Member(i, p, self._state(system, p, spec.initial_states[i])) for i in range(start, stop)]
+        if spec.sweep is not None:
+            group, index = _sweep_target(system, spec.sweep.parameter)
+            out = []
+            for i in range(start, stop):
+                value = spec.sweep.values[i]
+                pi = parameter_vector(system, _swept(parameters, group, index, value))
+                out.append(Member(i, pi, self._state(system, pi, spec.sweep.initial_state),
+                                  {"parameter": spec.sweep.parameter, "value": value}))
+            return out
+        from nonholonomic.analysis.sampling import LevelError, on_level
+
+        sample = spec.sample
+        try:
+            states = on_level(system, p, sample.level, stop, sample.seed)  # type: ignore[union-attr]
+        except LevelError as exc:
+            raise LevelProblem(f"members.sample.{exc.field}", exc.reason) from None
+        return [Member(i, p, states[i]) for i in range(start, stop)]
+
+    def _state(self, system: MechanicalSystem, p: np.ndarray, state: dict[str, list[float]]) -> np.ndarray:
+        y = state_vector(system, dict(state), p)
+        if self.project_initial_state:
+            y, _ = project_initial_state(system, p, y)
+        return y
+
+
+class LevelProblem(ValueError):
+    """A level set that cannot be sampled, with the request field that says so."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"{field}: {reason}")
+        self.field, self.reason = field, reason
+
+
+def _sweep_target(system: MechanicalSystem, path: str) -> tuple[Parameter, int | None]:
+    """The parameter group and component a sweep path names (``inertia[1]`` → inertia, 1)."""
+    match = _PATH.match(path.strip())
+    groups = {p.name: p for p in system.parameters}
+    if not match or match.group(1) not in groups:
+        raise ValueError(f"{path!r} names no parameter of {system.kind}; known: "
+                         + ", ".join(p.name + ("[i]" if p.is_vector else "") for p in system.parameters))
+    par = groups[match.group(1)]
+    index = None if match.group(2) is None else int(match.group(2))
+    if par.shape == "symmetric_matrix":
+        raise ValueError(f"{par.name} is a matrix; sweeps take a scalar or a vector component")
+    if par.is_vector and (index is None or index >= len(par.symbols)):
+        raise ValueError(f"{par.name} is a vector: name a component {par.name}[0] .. {par.name}[{len(par.symbols) - 1}]")
+    if not par.is_vector and index is not None:
+        raise ValueError(f"{par.name} is a scalar: no index")
+    return par, index
+
+
+def _swept(parameters: dict[str, Any], par: Parameter, index: int | None, value: float) -> dict[str, Any]:
+    values = dict(parameters)
+    if index is None:
+        values[par.name] = value
+    else:
+        vector = list(values[par.name])
+        vector[index] = value
+        values[par.name] = vector
+    return values
+
+
+class EnsembleAccepted(BaseModel):
+    """Answer to ``POST /v1/ensembles`` (202)."""
+
+    id: str
+    status: JobStatus
+    location: str
+    members: int
+    chunks: int
+
+
+class EnsembleView(BaseModel):
+    """An ensemble as ``GET /v1/ensembles/{id}`` shows it."""
+
+    id: str
+    status: JobStatus
+    progress: float = Field(ge=0, le=1, description="members done / members")
+    created_at: str
+    request: dict[str, Any]
+    members: int
+    members_done: int
+    chunks: dict[str, Any] = Field(description="total, done, and the workers that ran them")
+    summary: dict[str, Any] | None = Field(description="members succeeded/failed, worst integral drift, exponent "
+                                                       "statistics, section points (over the members done so far)")

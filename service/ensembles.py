@@ -1,0 +1,110 @@
+"""Reading an ensemble's record: its view (status, progress, summary), pages of members, and every
+member's section points as rows for the exports. The same for both modes (any
+:class:`workers.ensembles.EnsembleStore`)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+
+from nonholonomic.analysis.ensemble import summarize
+from workers.ensembles import EnsembleStore
+
+
+def view(ensemble_id: str, record: dict[str, Any]) -> dict[str, Any]:
+    """``GET /v1/ensembles/{id}``: status, progress = members done / members, the summary so far."""
+    chunks = record["chunks"]
+    total = sum(stop - start for start, stop in chunks)
+    done = record["done"]
+    members_done = sum(stop - start if i in done else min(record["progress"].get(i, 0), stop - start)
+                       for i, (start, stop) in enumerate(chunks))
+    if record["cancelled"] and len(done) < len(chunks):
+        status = "cancelled"
+    elif len(done) == len(chunks):
+        status = "succeeded"
+    elif done or record["progress"]:
+        status = "running"
+    else:
+        status = "queued"
+    digests = [d for i in sorted(record["digests"]) for d in record["digests"][i]]
+    workers: dict[str, int] = {}
+    for name in record["workers"].values():
+        workers[name] = workers.get(name, 0) + 1
+    return {"id": ensemble_id, "status": status, "progress": members_done / total if total else 1.0,
+            "created_at": record["created_at"], "request": record["request"], "members": total,
+            "members_done": members_done,
+            "chunks": {"total": len(chunks), "done": len(done), "size": chunks[0][1] - chunks[0][0],
+                       "workers": workers},
+            "summary": summarize(digests) if digests else None}
+
+
+def members_page(store: EnsembleStore, ensemble_id: str, record: dict[str, Any], offset: int,
+                 limit: int) -> list[dict[str, Any]]:
+    """Members ``offset .. offset + limit − 1`` of the finished chunks (members of unfinished chunks
+    are left out; the view's progress says how many are done)."""
+    out: list[dict[str, Any]] = []
+    for i, (start, stop) in enumerate(record["chunks"]):
+        if stop <= offset or start >= offset + limit or i not in record["done"]:
+            continue
+        members = store.chunk_members(ensemble_id, i) or []
+        out.extend(m for m in members if offset <= m["index"] < offset + limit)
+    return sorted(out, key=lambda m: m["index"])
+
+
+def _section_members(store: EnsembleStore, ensemble_id: str,
+                     record: dict[str, Any]) -> Iterator[tuple[int, dict[str, Any]]]:
+    for i in sorted(record["done"]):
+        for member in store.chunk_members(ensemble_id, i) or []:
+            if member.get("poincare"):
+                yield member["index"], member["poincare"]
+
+
+def _columns(section: dict[str, Any]) -> list[tuple[str, str, int | None]]:
+    """(column name, key in the section, component) for t, tau, every point vector's components."""
+    cols: list[tuple[str, str, int | None]] = [("t", "t", None)]
+    if section.get("tau") is not None:
+        cols.append(("tau", "tau", None))
+    for name, values in section["points"].items():
+        width = len(values[0]) if values else 3
+        cols += [(f"{name}{k + 1}", name, k) for k in range(width)]
+    return cols
+
+
+def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> Iterator[str]:
+    """Every member's crossings as CSV, one row per crossing, the member index first (streamed a chunk at a time)."""
+    header_written = False
+    for index, section in _section_members(store, ensemble_id, record):
+        cols = _columns(section)
+        buffer = io.StringIO()
+        writer = csv.writer(buffer)
+        if not header_written:
+            writer.writerow(["member", *[c[0] for c in cols]])
+            header_written = True
+        for row in range(section["count"]):
+            writer.writerow([index, *[repr(float(section[key][row] if k is None else section["points"][key][row][k]))
+                                      for _, key, k in cols]])
+        yield buffer.getvalue()
+    if not header_written:
+        yield "member,t\n"
+
+
+def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> bytes:
+    """Every member's crossings as NPZ arrays (``member``, ``t``, ``tau``, each point vector ``(n, 3)``),
+    with the request as JSON in ``request_json``."""
+    parts: dict[str, list[np.ndarray]] = {"member": []}
+    for index, section in _section_members(store, ensemble_id, record):
+        parts["member"].append(np.full(section["count"], index, dtype=np.int64))
+        for key in ("t", "tau"):
+            if section.get(key) is not None:
+                parts.setdefault(key, []).append(np.asarray(section[key], dtype=float))
+        for name, values in section["points"].items():
+            parts.setdefault(name, []).append(np.asarray(values, dtype=float).reshape(-1, 3))
+    arrays = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays, request_json=np.array(json.dumps(record["request"])))
+    return buffer.getvalue()

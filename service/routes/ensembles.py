@@ -1,0 +1,94 @@
+"""``/v1/ensembles``: many orbits of one system, fanned out to the workers in chunks."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from fastapi import APIRouter, Query, Request, Response
+from fastapi.responses import JSONResponse, StreamingResponse
+
+from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView
+from schemas.problems import CONFLICT, NOT_FOUND, FieldError, Problem
+from service.backends import JobBackend
+from service.ensembles import members_page, section_csv, section_npz, view
+from service.errors import ProblemError, invalid_request
+
+router = APIRouter(prefix="/v1/ensembles", tags=["ensembles"])
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    404: {"model": Problem, "description": "unknown ensemble id"},
+    422: {"model": Problem, "description": "invalid request; `errors` names each field"},
+}
+#: Most members one page returns.
+MAX_PAGE = 1000
+
+
+def _backend(request: Request) -> JobBackend:
+    return request.app.state.backend
+
+
+def _record(request: Request, ensemble_id: str) -> dict[str, Any]:
+    record = _backend(request).ensembles.record(ensemble_id)
+    if record is None:
+        raise ProblemError(404, "Unknown ensemble", f"no ensemble with id {ensemble_id!r}", NOT_FOUND)
+    return record
+
+
+@router.post("", status_code=202, response_model=EnsembleAccepted, responses=_ERRORS,
+             summary="Submit an ensemble (members from a list, a level set or a parameter sweep)")
+def submit_ensemble(body: EnsembleRequest, request: Request, response: Response) -> EnsembleAccepted:
+    """Every member is validated before anything is queued; then the chunks go to the workers."""
+    problems = body.problems()
+    if problems:
+        raise invalid_request([FieldError(field=p.field, reason=p.reason) for p in problems])
+    chunks = body.chunks()
+    ensemble_id, _ = _backend(request).submit_ensemble(body.model_dump(mode="json"), chunks)
+    location = f"/v1/ensembles/{ensemble_id}"
+    response.headers["Location"] = location
+    return EnsembleAccepted(id=ensemble_id, status="queued", location=location, members=body.members.count,
+                            chunks=len(chunks))
+
+
+@router.get("/{ensemble_id}", response_model=EnsembleView, responses=_ERRORS,
+            summary="Status, progress (members done / total) and summary of an ensemble")
+def get_ensemble(ensemble_id: str, request: Request) -> JSONResponse:
+    return JSONResponse(view(ensemble_id, _record(request, ensemble_id)))
+
+
+@router.get("/{ensemble_id}/members", responses=_ERRORS, summary="A page of member results")
+def get_members(ensemble_id: str, request: Request, offset: int = Query(0, ge=0),
+                limit: int = Query(100, ge=1, le=MAX_PAGE)) -> JSONResponse:
+    """Members ``offset .. offset + limit - 1`` that are done, each with its index, label, status and
+    the same result fields as a job."""
+    record = _record(request, ensemble_id)
+    page = members_page(_backend(request).ensembles, ensemble_id, record, offset, limit)
+    total = sum(stop - start for start, stop in record["chunks"])
+    return JSONResponse({"offset": offset, "limit": limit, "total": total, "members": page})
+
+
+@router.get("/{ensemble_id}/poincare", responses={**_ERRORS, 409: {"model": Problem,
+                                                                  "description": "no section asked for"}},
+            summary="Every member's Poincare crossings, with the member index (CSV or NPZ)")
+def get_section(ensemble_id: str, request: Request,
+                format: Literal["csv", "npz"] = Query("csv")) -> Response:  # noqa: A002
+    record = _record(request, ensemble_id)
+    if not record["request"].get("poincare"):
+        raise ProblemError(409, "No section", "this ensemble did not ask for a poincare section", CONFLICT)
+    store = _backend(request).ensembles
+    filename = f"ensemble-{ensemble_id}-poincare.{format}"
+    headers = {"Content-Disposition": f'attachment; filename="{filename}"'}
+    if format == "csv":
+        return StreamingResponse(section_csv(store, ensemble_id, record), media_type="text/csv", headers=headers)
+    return Response(section_npz(store, ensemble_id, record), media_type="application/octet-stream", headers=headers)
+
+
+@router.delete("/{ensemble_id}", status_code=202, response_model=EnsembleView,
+               responses={**_ERRORS, 409: {"model": Problem, "description": "the ensemble already finished"}},
+               summary="Cancel every chunk of an ensemble")
+def cancel_ensemble(ensemble_id: str, request: Request) -> JSONResponse:
+    record = _record(request, ensemble_id)
+    before = view(ensemble_id, record)
+    if before["status"] in ("succeeded", "failed"):
+        raise ProblemError(409, "Ensemble already finished", f"ensemble {ensemble_id} already {before['status']}",
+                           CONFLICT)
+    _backend(request).cancel_ensemble(ensemble_id)
+    return JSONResponse(view(ensemble_id, _record(request, ensemble_id)), status_code=202)

@@ -1,0 +1,144 @@
+"""Ensembles through the real queue: the API under uvicorn, a Celery worker with two processes,
+Redis. Chunks fan out as one group, progress moves while they run, cancel stops them, and a worker
+process SIGKILLed mid-chunk loses nothing: the chunk is redelivered and counted once."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+import uuid
+from collections.abc import Iterator
+
+import httpx
+import pytest
+import redis
+
+from tests.support import (
+    TEST_REDIS_URL,
+    free_port,
+    redis_available,
+    start_api,
+    start_worker,
+    stop,
+    wait_healthy,
+    wait_until,
+)
+
+pytestmark = pytest.mark.integration
+
+BALL = {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7}
+LIMITS = {"NONHOLONOMIC_MAX_T_FINAL": "1e9"}
+
+
+@pytest.fixture(scope="module")
+def stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, subprocess.Popen]]:
+    if not redis_available():
+        pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
+    store = redis.Redis.from_url(TEST_REDIS_URL)
+    logs = tmp_path_factory.mktemp("ensemble-logs")
+    queue = f"test-ens-{uuid.uuid4().hex[:8]}"
+    port = free_port()
+    worker = start_worker(TEST_REDIS_URL, queue, logs / "worker.log", concurrency=2, extra_env=LIMITS)
+    api = start_api(port, logs / "api.log", {"REDIS_URL": TEST_REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS})
+    base = f"http://127.0.0.1:{port}"
+    try:
+        wait_healthy(base, timeout=180)
+        with httpx.Client(base_url=base, timeout=10) as client:
+            yield client, store, worker
+    except Exception:
+        for p in sorted(logs.glob("*.log")):
+            print(f"--- {p.name}\n{p.read_text()[-4000:]}")
+        raise
+    finally:
+        stop(api)
+        stop(worker)
+
+
+def _finish(client: httpx.Client, location: str, timeout: float) -> dict:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        view = client.get(location).json()
+        if view["status"] in ("succeeded", "cancelled", "failed"):
+            return view
+        time.sleep(0.1)
+    raise TimeoutError(location)
+
+
+def _all_members(client: httpx.Client, ensemble_id: str) -> list[dict]:
+    return client.get(f"/v1/ensembles/{ensemble_id}/members", params={"limit": 1000}).json()["members"]
+
+
+def _children(pid: int) -> list[int]:
+    out = subprocess.run(["pgrep", "-P", str(pid)], capture_output=True, text=True).stdout
+    return [int(x) for x in out.split()]
+
+
+def test_chunks_fan_out_to_both_processes_and_progress_moves(stack):
+    client, _, _ = stack
+    body = {"system": BALL, "t_final": 400.0, "chunk_size": 8, "samples": 2,
+            "members": {"sample": {"count": 48, "seed": 3, "level": {"energy": 1.0, "area": 0.1}}},
+            "lyapunov": {"count": 6}}
+    r = client.post("/v1/ensembles", json=body)
+    assert r.status_code == 202, r.text
+    assert r.json()["chunks"] == 6
+    location = r.headers["location"]
+    seen = []
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline:
+        view = client.get(location).json()
+        seen.append(view["progress"])
+        if view["status"] == "succeeded":
+            break
+        time.sleep(0.1)
+    assert view["status"] == "succeeded", view
+    assert any(0 < p < 1 for p in seen), "progress never moved between 0 and 1"
+    assert seen == sorted(seen)
+    assert view["chunks"]["done"] == 6 and sum(view["chunks"]["workers"].values()) == 6
+    assert view["summary"]["succeeded"] == 48
+    members = _all_members(client, view["id"])
+    assert [m["index"] for m in members] == list(range(48))
+    for m in members:  # the sum of the spectrum vanishes (invariant measure, eq. 2604-3)
+        assert abs(m["lyapunov"]["sum"]) < 1e-2
+
+
+def test_cancel_stops_every_chunk_within_a_second(stack):
+    client, _, _ = stack
+    body = {"system": BALL, "t_final": 20000.0, "chunk_size": 4,
+            "members": {"sample": {"count": 40, "seed": 1, "level": {"energy": 1.0}}}, "lyapunov": {"count": 6}}
+    location = client.post("/v1/ensembles", json=body).headers["location"]
+    wait_until(lambda: client.get(location).json()["members_done"] > 0
+               or client.get(location).json()["status"] == "running", 120, "a running chunk")
+    assert client.delete(location).json()["status"] == "cancelled"
+    time.sleep(1.0)
+    done = client.get(location).json()["members_done"]
+    time.sleep(1.5)
+    after = client.get(location).json()
+    assert after["status"] == "cancelled" and after["members_done"] == done < 40
+    # both processes are free again: a small ensemble finishes promptly
+    small = {"system": BALL, "t_final": 10.0, "members": {"sample": {"count": 8, "level": {"energy": 1.0}}}}
+    start = time.monotonic()
+    view = _finish(client, client.post("/v1/ensembles", json=small).headers["location"], 60)
+    assert view["status"] == "succeeded" and time.monotonic() - start < 20
+
+
+def test_a_worker_process_killed_mid_chunk_loses_no_member_and_counts_none_twice(stack):
+    client, store, worker = stack
+    body = {"system": BALL, "t_final": 1500.0, "chunk_size": 4, "samples": 2,
+            "members": {"sample": {"count": 16, "seed": 5, "level": {"energy": 1.0}}}, "lyapunov": {"count": 6}}
+    r = client.post("/v1/ensembles", json=body)
+    ensemble_id, location = r.json()["id"], r.headers["location"]
+    progress_key = f"nonholonomic:ensemble:{ensemble_id}:progress"
+    wait_until(lambda: store.hlen(progress_key) > 0, 120, "a chunk reporting progress")
+    children = _children(worker.pid)
+    assert children, "the worker has no pool processes"
+    for pid in children[:1]:
+        os.kill(pid, signal.SIGKILL)
+    view = _finish(client, location, 400)
+    assert view["status"] == "succeeded", view
+    assert view["chunks"]["done"] == 4 and view["members_done"] == 16
+    members = _all_members(client, ensemble_id)
+    assert [m["index"] for m in members] == list(range(16))
+    assert all(m["status"] == "succeeded" for m in members)
+    assert view["summary"]["members"] == 16
