@@ -39,7 +39,8 @@ def view(ensemble_id: str, record: dict[str, Any]) -> dict[str, Any]:
             "created_at": record["created_at"], "request": record["request"], "members": total,
             "members_done": members_done,
             "chunks": {"total": len(chunks), "done": len(done), "size": chunks[0][1] - chunks[0][0],
-                       "workers": workers},
+                       "workers": workers,
+                       "reruns": sum(max(0, n - 1) for n in record.get("starts", {}).values())},
             "summary": summarize(digests) if digests else None}
 
 

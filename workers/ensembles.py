@@ -36,6 +36,7 @@ class EnsembleStore(Protocol):
     def cancel(self, ensemble_id: str) -> None: ...
     def chunk_done(self, ensemble_id: str, chunk: int) -> bool: ...
     def set_progress(self, ensemble_id: str, chunk: int, members_done: int) -> None: ...
+    def mark_started(self, ensemble_id: str, chunk: int) -> None: ...
     def store_chunk(self, ensemble_id: str, chunk: int, members: list[dict[str, Any]],
                     digests: list[dict[str, Any]], worker: str) -> None: ...
     def chunk_members(self, ensemble_id: str, chunk: int) -> list[dict[str, Any]] | None: ...
@@ -57,7 +58,7 @@ class MemoryEnsembleStore:
         with self._lock:
             self._records[ensemble_id] = {"request": request, "created_at": created_at, "chunks": chunks,
                                           "cancelled": False, "done": set(), "progress": {}, "digests": {},
-                                          "workers": {}, "members": {}}
+                                          "workers": {}, "members": {}, "starts": {}}
         return created_at
 
     def record(self, ensemble_id: str) -> dict[str, Any] | None:
@@ -67,7 +68,7 @@ class MemoryEnsembleStore:
                 return None
             return {"request": r["request"], "created_at": r["created_at"], "chunks": r["chunks"],
                     "cancelled": r["cancelled"], "done": set(r["done"]), "progress": dict(r["progress"]),
-                    "digests": dict(r["digests"]), "workers": dict(r["workers"])}
+                    "digests": dict(r["digests"]), "workers": dict(r["workers"]), "starts": dict(r["starts"])}
 
     def is_cancelled(self, ensemble_id: str) -> bool:
         return bool(self._records.get(ensemble_id, {}).get("cancelled"))
@@ -83,6 +84,11 @@ class MemoryEnsembleStore:
         with self._lock:
             self._records[ensemble_id]["progress"][chunk] = members_done
 
+    def mark_started(self, ensemble_id: str, chunk: int) -> None:
+        with self._lock:
+            starts = self._records[ensemble_id]["starts"]
+            starts[chunk] = starts.get(chunk, 0) + 1
+
     def store_chunk(self, ensemble_id: str, chunk: int, members: list[dict[str, Any]],
                     digests: list[dict[str, Any]], worker: str) -> None:
         with self._lock:
@@ -97,7 +103,7 @@ class MemoryEnsembleStore:
 class RedisEnsembleStore:
     """The store of queue mode: ``nonholonomic:ensemble:{id}`` (hash: request, created_at, chunks,
     cancelled) and beside it ``:done`` (set of finished chunks), ``:progress``, ``:digests``,
-    ``:workers`` (hashes by chunk) and ``:chunk:{i}`` (the members' results), all with the job TTL."""
+    ``:workers``, ``:starts`` (hashes by chunk) and ``:chunk:{i}`` (the members' results), all with the job TTL."""
 
     def __init__(self, client: redis.Redis, ttl_s: int) -> None:
         self.client, self.ttl_s = client, ttl_s
@@ -122,7 +128,8 @@ class RedisEnsembleStore:
         pipe.hgetall(self.key(ensemble_id, "progress"))
         pipe.hgetall(self.key(ensemble_id, "digests"))
         pipe.hgetall(self.key(ensemble_id, "workers"))
-        raw, done, progress, digests, workers = pipe.execute()
+        pipe.hgetall(self.key(ensemble_id, "starts"))
+        raw, done, progress, digests, workers, starts = pipe.execute()
         if not raw:
             return None
         fields = {k.decode(): v.decode() for k, v in raw.items()}
@@ -132,7 +139,8 @@ class RedisEnsembleStore:
                 "done": {int(c) for c in done},
                 "progress": {int(k): int(v) for k, v in progress.items()},
                 "digests": {int(k): json.loads(v) for k, v in digests.items()},
-                "workers": {int(k): v.decode() for k, v in workers.items()}}
+                "workers": {int(k): v.decode() for k, v in workers.items()},
+                "starts": {int(k): int(v) for k, v in starts.items()}}
 
     def is_cancelled(self, ensemble_id: str) -> bool:
         return self.client.hget(self.key(ensemble_id), "cancelled") == b"1"
@@ -147,6 +155,12 @@ class RedisEnsembleStore:
         pipe = self.client.pipeline()
         pipe.hset(self.key(ensemble_id, "progress"), chunk, members_done)
         pipe.expire(self.key(ensemble_id, "progress"), self.ttl_s)
+        pipe.execute()
+
+    def mark_started(self, ensemble_id: str, chunk: int) -> None:
+        pipe = self.client.pipeline()
+        pipe.hincrby(self.key(ensemble_id, "starts"), chunk, 1)
+        pipe.expire(self.key(ensemble_id, "starts"), self.ttl_s)
         pipe.execute()
 
     def store_chunk(self, ensemble_id: str, chunk: int, members: list[dict[str, Any]],
@@ -180,6 +194,7 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
     if record is None:
         return "cancelled"  # expired or never created
     start, stop = record["chunks"][chunk]
+    store.mark_started(ensemble_id, chunk)
     request = EnsembleRequest.model_validate(record["request"])
     last = [time.monotonic()]
 
