@@ -70,12 +70,15 @@ def phase(progress: ProgressCallback | None, start: float, end: float) -> Progre
     return lambda fraction: progress(start + (end - start) * fraction)
 
 
-def evidence(system: MechanicalSystem, p: np.ndarray, trajectory: Trajectory,
-             checks: Sequence[str]) -> tuple[dict[str, np.ndarray], list[IntegralEvidence], list[CheckEvidence]]:
-    """The derived vectors at the samples, the integrals' drift and the checks in ``checks`` for one trajectory."""
+def evidence(system: MechanicalSystem, p: np.ndarray, trajectory: Trajectory, checks: Sequence[str],
+             integrals: list[IntegralEvidence] | None = None,
+             ) -> tuple[dict[str, np.ndarray], list[IntegralEvidence], list[CheckEvidence]]:
+    """The derived vectors at the samples, the integrals' drift and the checks in ``checks`` for one
+    trajectory (``integrals``: the drift already computed, e.g. for a batch of members at once)."""
     kernels = numeric(system)
     derived = {name: fn(trajectory.states, p) for name, fn in kernels.derived.items()}
-    integrals = integral_evidence(system, p, trajectory) if "integrals" in checks else []
+    if integrals is None:
+        integrals = integral_evidence(system, p, trajectory) if "integrals" in checks else []
     found = measure_evidence(system, p, trajectory.states) if "measure" in checks else []
     if "bracket" in checks:
         found += bracket_evidence(system, p, trajectory.states)

@@ -1,14 +1,19 @@
-"""First integrals evaluated along a trajectory: initial, final and the largest drift."""
+"""First integrals evaluated along a trajectory: initial, final and the largest drift (one trajectory,
+or many of one system at once)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
+from functools import lru_cache
 
+import heyoka as hy
 import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.integration import Trajectory
 from nonholonomic.kernels import numeric
+from nonholonomic.taylor import TaylorSystem, taylor_system
 
 #: The verdict's tolerance on the relative drift never goes below this.
 INTEGRAL_TOLERANCE_FLOOR = 1e-10
@@ -75,3 +80,92 @@ def integral_evidence(system: MechanicalSystem, parameters: np.ndarray, trajecto
         )
         for i, claim in enumerate(system.integrals)
     ]
+
+
+def integral_evidence_batch(system: MechanicalSystem, parameters: np.ndarray, trajectories: Sequence[Trajectory],
+                            tolerance: float | None = None) -> list[list[IntegralEvidence]]:
+    """:func:`integral_evidence` of many trajectories of one system (e.g. an ensemble's members) at once.
+
+    The integrals and their scales are evaluated at the trajectories' points (samples and steps) by
+    a heyoka compiled function generated from the same symbolic integrals
+    (:func:`compiled_integrals`), a few thousand points per call, then reduced per trajectory with
+    numpy; ~10× faster than :func:`integral_evidence` member by member for short trajectories. The
+    numbers agree with :func:`integral_evidence`'s (numpy kernels) to rounding: a drift of a few
+    1e-16 may differ in its last units.
+
+    Parameters
+    ----------
+    parameters : shape ``(n_members, n_parameters)``: each trajectory's parameter vector.
+    trajectories : one per row of ``parameters``.
+    tolerance : as for :func:`integral_evidence` (default: each trajectory's own).
+    """
+    P = np.asarray(parameters, dtype=float).reshape(len(trajectories), -1)
+    if not system.integrals or not trajectories:
+        return [[] for _ in trajectories]
+    cf, ts = compiled_integrals(system)
+    runtime = ts.runtime_parameters(P.T)[:cf.nparams]
+    counts = [len(t.states) + len(t.step_states) for t in trajectories]
+    out: list[list[IntegralEvidence]] = []
+    start = 0
+    while start < len(trajectories):  # groups of members with about GROUP_POINTS points: cache-sized arrays
+        stop, total = start, 0
+        while stop < len(trajectories) and (stop == start or total + counts[stop] <= GROUP_POINTS):
+            total += counts[stop]
+            stop += 1
+        out.extend(_group(system, cf, runtime[:, start:stop], trajectories[start:stop], counts[start:stop], tolerance))
+        start = stop
+    return out
+
+
+#: Points per call of the compiled integrals in :func:`integral_evidence_batch`.
+GROUP_POINTS = 8192
+
+
+def _group(system: MechanicalSystem, cf: hy.cfunc, runtime: np.ndarray, trajectories: Sequence[Trajectory],
+           counts: list[int], tolerance: float | None) -> list[list[IntegralEvidence]]:
+    """The evidence of a few trajectories (``runtime``: their runtime parameters, one column each)."""
+    k = len(system.integrals)
+    first = np.cumsum([0] + counts[:-1])
+    points = np.empty((system.dimension, sum(counts)))  # one column per point: samples, then steps
+    for t, start in zip(trajectories, first.tolist()):
+        middle = start + len(t.states)
+        points[:, start:middle] = t.states.T
+        points[:, middle:middle + len(t.step_states)] = t.step_states.T
+    values = cf(points, pars=np.repeat(runtime, counts, axis=1))  # the integrals, then their scales
+    initial = values[:k, first]
+    final = values[:k, first + np.array([len(t.t) for t in trajectories]) - 1]
+    # max |I - I(0)| from the extremes (subtraction is monotonic: the same number exactly)
+    abs_drift = np.maximum(np.maximum.reduceat(values[:k], first, axis=1) - initial,
+                           initial - np.minimum.reduceat(values[:k], first, axis=1))
+    scale = np.maximum.reduceat(np.abs(values[k:]), first, axis=1)
+    reference = np.maximum(np.abs(initial), scale)
+    reference = np.where(reference > 0, reference, 1.0)
+    with np.errstate(all="ignore"):
+        rel_drift = abs_drift / reference
+    tols = [integral_tolerance(t.tolerance) if tolerance is None else tolerance for t in trajectories]
+    passed = np.isfinite(rel_drift) & (rel_drift <= np.array(tols))
+    rows = zip(*(a.T.tolist() for a in (initial, final, abs_drift, rel_drift, reference, passed)))
+    return [[_evidence((claim.name, claim.formula, claim.equation, i0, i1, d_abs, d_rel, ref, count, tol, ok))
+             for claim, i0, i1, d_abs, d_rel, ref, ok in zip(system.integrals, *member)]
+            for member, count, tol in zip(rows, counts, tols)]
+
+
+_FIELDS = tuple(f.name for f in fields(IntegralEvidence))
+
+
+def _evidence(values: tuple[object, ...]) -> IntegralEvidence:
+    """An :class:`IntegralEvidence` from its field values in order, set in one ``__dict__`` update
+    instead of the frozen dataclass's ``object.__setattr__`` per field (4× faster; an ensemble
+    chunk builds thousands)."""
+    evidence = object.__new__(IntegralEvidence)
+    evidence.__dict__.update(zip(_FIELDS, values))
+    return evidence
+
+
+@lru_cache(maxsize=64)
+def compiled_integrals(system: MechanicalSystem) -> tuple[hy.cfunc, TaylorSystem]:
+    """A heyoka compiled function of the state: ``[integral_1, ..., integral_k, scale_1, ..., scale_k]``,
+    with :func:`~nonholonomic.taylor.taylor_system`'s runtime parameters (once per system and process)."""
+    ts = taylor_system(system)
+    exprs = [c.expression for c in system.integrals] + [c.scale for c in system.integrals]
+    return hy.cfunc(ts.expressions(exprs), list(ts.variables[: ts.n_state])), ts
