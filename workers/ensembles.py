@@ -32,6 +32,7 @@ class EnsembleStore(Protocol):
 
     def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]]) -> str: ...
     def record(self, ensemble_id: str) -> dict[str, Any] | None: ...
+    def spec(self, ensemble_id: str) -> tuple[dict[str, Any], list[tuple[int, int]]] | None: ...
     def is_cancelled(self, ensemble_id: str) -> bool: ...
     def cancel(self, ensemble_id: str) -> None: ...
     def chunk_done(self, ensemble_id: str, chunk: int) -> bool: ...
@@ -69,6 +70,10 @@ class MemoryEnsembleStore:
             return {"request": r["request"], "created_at": r["created_at"], "chunks": r["chunks"],
                     "cancelled": r["cancelled"], "done": set(r["done"]), "progress": dict(r["progress"]),
                     "digests": dict(r["digests"]), "workers": dict(r["workers"]), "starts": dict(r["starts"])}
+
+    def spec(self, ensemble_id: str) -> tuple[dict[str, Any], list[tuple[int, int]]] | None:
+        r = self._records.get(ensemble_id)
+        return None if r is None else (r["request"], r["chunks"])
 
     def is_cancelled(self, ensemble_id: str) -> bool:
         return bool(self._records.get(ensemble_id, {}).get("cancelled"))
@@ -142,6 +147,12 @@ class RedisEnsembleStore:
                 "workers": {int(k): v.decode() for k, v in workers.items()},
                 "starts": {int(k): int(v) for k, v in starts.items()}}
 
+    def spec(self, ensemble_id: str) -> tuple[dict[str, Any], list[tuple[int, int]]] | None:
+        request, chunks = self.client.hmget(self.key(ensemble_id), "request", "chunks")
+        if request is None or chunks is None:
+            return None
+        return json.loads(request), [tuple(c) for c in json.loads(chunks)]
+
     def is_cancelled(self, ensemble_id: str) -> bool:
         return self.client.hget(self.key(ensemble_id), "cancelled") == b"1"
 
@@ -190,12 +201,12 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
         return "cancelled"
     if store.chunk_done(ensemble_id, chunk):
         return "already done"
-    record = store.record(ensemble_id)
-    if record is None:
+    spec = store.spec(ensemble_id)
+    if spec is None:
         return "cancelled"  # expired or never created
-    start, stop = record["chunks"][chunk]
+    start, stop = spec[1][chunk]
     store.mark_started(ensemble_id, chunk)
-    request = EnsembleRequest.model_validate(record["request"])
+    request = EnsembleRequest.model_validate(spec[0])
     last = [time.monotonic()]
 
     def progress(fraction: float) -> bool:
