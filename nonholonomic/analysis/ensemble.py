@@ -26,11 +26,12 @@ from nonholonomic.simulation import SimulationResult, evidence, phase
 
 #: Seconds of work one chunk aims at (the default ``chunk_size``).
 CHUNK_SECONDS = 1.0
-#: Estimated seconds per member and unit of physical time (the ball's batch rate, measured in
-#: bench/bench_ensemble.py, ~3500 trajectories of t = 100 per second), before the factors below.
+#: Estimated seconds per member and unit of physical time for a 6-dimensional system (Chaplygin's ball,
+#: measured on 2 cores): the batch integration (bench/bench_ensemble.py, ~3500 trajectories of t = 100
+#: per second) and the variational equations with QR every unit of time (~60 ms for t = 400).
 SECONDS_PER_UNIT_TIME = 3e-6
-#: Cost factors: a section adds an event to every step; the variational equations of an
-#: n-dimensional system integrate n + n·count variables.
+LYAPUNOV_SECONDS_PER_UNIT_TIME = 1.5e-4
+#: A section adds an event to every step.
 SECTION_FACTOR = 1.5
 MAX_CHUNK_SIZE = 4096
 
@@ -78,12 +79,10 @@ class MemberResult:
 def default_chunk_size(system: MechanicalSystem, t_final: float, *, poincare: SectionOptions | None = None,
                        lyapunov: SpectrumOptions | None = None, lanes: int = 4) -> int:
     """Members per chunk for about :data:`CHUNK_SECONDS` of work, a multiple of ``lanes`` (the SIMD batch)."""
-    cost = SECONDS_PER_UNIT_TIME * max(t_final, 1e-9) * (system.dimension / 6) ** 2
-    if poincare is not None:
-        cost *= SECTION_FACTOR
-    if lyapunov is not None:
-        count = lyapunov.count or system.dimension
-        cost *= 2 + (1 + count)  # the trajectory, and the orbit with its tangent vectors
+    per_unit_time = SECONDS_PER_UNIT_TIME * (1 + SECTION_FACTOR * (poincare is not None))
+    if lyapunov is not None:  # the orbit with its whole tangent matrix, a QR every interval
+        per_unit_time += LYAPUNOV_SECONDS_PER_UNIT_TIME * max(1.0, 1.0 / lyapunov.interval)
+    cost = per_unit_time * max(t_final, 1e-9) * (system.dimension / 6) ** 2
     size = int(CHUNK_SECONDS / cost)
     return max(lanes, min(MAX_CHUNK_SIZE, size - size % lanes))
 
