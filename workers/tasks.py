@@ -70,7 +70,7 @@ def _ensemble_store() -> RedisEnsembleStore:
     return RedisEnsembleStore(redis.Redis.from_url(settings.redis_url or DEFAULT_REDIS_URL), settings.job_ttl_s)
 
 
-@app.task(bind=True, name="nonholonomic.ensemble_chunk")
+@app.task(bind=True, name="nonholonomic.ensemble_chunk", ignore_result=True)
 def ensemble_chunk(self: Task, ensemble_id: str, chunk: int) -> str:
     """Run one chunk of an ensemble (:func:`workers.ensembles.run_ensemble_chunk`); the results go to
     the ensemble's record, the task's own result is only what happened (``done``, ``cancelled`` ...)."""
