@@ -19,7 +19,7 @@ from nonholonomic.definition import MechanicalSystem, Parameter
 from nonholonomic.initial_state import FieldProblem, initial_state_problems, project_initial_state
 from nonholonomic.kernels import parameter_vector, state_vector
 from schemas.analysis import LyapunovRequest, PoincareRequest
-from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems
+from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems, t_final_within_limit
 from schemas.settings import get_settings
 from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
 
@@ -97,13 +97,7 @@ class EnsembleRequest(BaseModel):
     project_initial_state: bool = Field(False, description="project each member's state onto the constraints")
     chunk_size: int | None = Field(None, ge=1, description="members per chunk (default: about one second of work)")
 
-    @field_validator("t_final")
-    @classmethod
-    def _t_final_limit(cls, v: float) -> float:
-        limit = get_settings().max_t_final
-        if v > limit:
-            raise ValueError(f"t_final = {v:g} exceeds this service's maximum {limit:g}")
-        return v
+    _t_final_limit = field_validator("t_final")(t_final_within_limit)
 
     def definition(self) -> MechanicalSystem:
         return self.system.definition()  # type: ignore[attr-defined]

@@ -20,6 +20,14 @@ JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 TERMINAL_STATUSES: frozenset[str] = frozenset({"succeeded", "failed", "cancelled"})
 
 
+def t_final_within_limit(cls: type, v: float) -> float:
+    """``t_final`` up to the service's ``max_t_final`` (a field validator of jobs and ensembles)."""
+    limit = get_settings().max_t_final
+    if v > limit:
+        raise ValueError(f"t_final = {v:g} exceeds this service's maximum {limit:g}")
+    return v
+
+
 class IntegratorOptions(BaseModel):
     """Which engine integrates, at which tolerance."""
 
@@ -64,13 +72,7 @@ class JobRequest(BaseModel):
     lyapunov: LyapunovRequest | None = Field(None, description="the Lyapunov spectrum of the orbit (heyoka "
                                                                "variational equations, QR)")
 
-    @field_validator("t_final")
-    @classmethod
-    def _t_final_limit(cls, v: float) -> float:
-        limit = get_settings().max_t_final
-        if v > limit:
-            raise ValueError(f"t_final = {v:g} exceeds this service's maximum {limit:g}")
-        return v
+    _t_final_limit = field_validator("t_final")(t_final_within_limit)
 
     @field_validator("samples")
     @classmethod

@@ -474,7 +474,6 @@ def _finish(system: MechanicalSystem, p: np.ndarray, acc: _Accumulator, end_stat
             interval: float, transient: float, t_final: float, tol: float, integrator_steps: int,
             wall: float) -> Spectrum:
     """The :class:`Spectrum` of one member from its accumulated sums."""
-    n = system.dimension
     span = t_final - transient
     values = acc.logs / span
     order = np.argsort(-values, kind="stable")

@@ -778,7 +778,6 @@ def section_batch(
 def _run_batch(req: _Request, ta: hy.taylor_adaptive_batch, recorder: _BatchCrossings, P: np.ndarray,
                Y: np.ndarray, progress: ProgressCallback | None) -> list[Section | IntegrationError]:
     """Integrate up to one batch of members (``len(Y) <= batch``)."""
-    system = req.system
     ts = req.prep.ts
     batch = ta.batch_size
     real = len(Y)

@@ -3,24 +3,14 @@ and every 422 they can give."""
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
 
+from tests.support import poll_job
 from tests.api.conftest import BALL, job
 
 LINEAR = {**BALL, "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}}
-
-
-def _finish(client, location: str, timeout: float = 120.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        view = client.get(location).json()
-        if view["status"] in ("succeeded", "cancelled", "failed"):
-            return view
-        time.sleep(0.05)
-    raise TimeoutError(location)
 
 
 def test_job_with_section_and_spectrum(client):
@@ -29,7 +19,7 @@ def test_job_with_section_and_spectrum(client):
                lyapunov={"interval": 0.5})
     r = client.post("/v1/jobs", json=body)
     assert r.status_code == 202, r.text
-    view = _finish(client, r.headers["location"])
+    view = poll_job(client, r.headers["location"])
     assert view["status"] == "succeeded", view["error"]
     result = view["result"]
     section = result["poincare"]
@@ -51,7 +41,7 @@ def test_job_with_section_and_spectrum(client):
 
 def test_max_points_stops_early_with_a_warning(client):
     body = job(t_final=1000.0, poincare={"surface": "gamma3", "max_points": 5})
-    view = _finish(client, client.post("/v1/jobs", json=body).headers["location"])
+    view = poll_job(client, client.post("/v1/jobs", json=body).headers["location"])
     section = view["result"]["poincare"]
     assert section["count"] == 5 and section["stopped_early"]
     assert any("max_points" in w for w in section["warnings"])

@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+from tests.support import poll_job
 from tests.api.conftest import BALL, STATE, job
 
 SAMPLED = {"system": dict(BALL),
@@ -17,16 +18,6 @@ SAMPLED = {"system": dict(BALL),
            "t_final": 60.0, "samples": 3, "checks": ["integrals", "measure"],
            "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "gamma2"]},
            "lyapunov": {"count": 1, "interval": 1.0}, "chunk_size": 4}
-
-
-def _finish(client, location: str, timeout: float = 120.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        view = client.get(location).json()
-        if view["status"] in ("succeeded", "cancelled", "failed"):
-            return view
-        time.sleep(0.05)
-    raise TimeoutError(location)
 
 
 def _members(client, ensemble_id: str) -> list[dict]:
@@ -48,7 +39,7 @@ def test_sampled_ensemble_on_one_level_with_section_and_exponents(client):
     accepted = r.json()
     assert accepted["members"] == 6 and accepted["chunks"] == 2
     assert r.headers["location"] == f"/v1/ensembles/{accepted['id']}"
-    view = _finish(client, r.headers["location"])
+    view = poll_job(client, r.headers["location"])
     assert view["status"] == "succeeded" and view["progress"] == 1.0 and view["members_done"] == 6
     assert view["chunks"]["done"] == 2 and sum(view["chunks"]["workers"].values()) == 2
     summary = view["summary"]
@@ -82,7 +73,7 @@ def test_same_request_and_seed_give_the_same_numbers_bit_for_bit(client):
     body = {**SAMPLED, "lyapunov": None}
     ids = [client.post("/v1/ensembles", json=body).json()["id"] for _ in range(2)]
     for i in ids:
-        assert _finish(client, f"/v1/ensembles/{i}")["status"] == "succeeded"
+        assert poll_job(client, f"/v1/ensembles/{i}")["status"] == "succeeded"
     first, second = (_strip_times(_members(client, i)) for i in ids)
     assert first == second
 
@@ -92,12 +83,12 @@ def test_sweep_members_equal_single_jobs(client):
             "members": {"sweep": {"parameter": "D", "values": [0.1, 0.5, 0.9], "initial_state": STATE}}}
     r = client.post("/v1/ensembles", json=body)
     assert r.status_code == 202, r.text
-    assert _finish(client, r.headers["location"])["status"] == "succeeded"
+    assert poll_job(client, r.headers["location"])["status"] == "succeeded"
     members = _members(client, r.json()["id"])
     for member, D in zip(members, [0.1, 0.5, 0.9]):
         assert member["label"] == {"parameter": "D", "value": D}
         single = client.post("/v1/jobs", json=job(system={**BALL, "D": D}, t_final=30.0, samples=5))
-        view = _finish(client, single.headers["location"])
+        view = poll_job(client, single.headers["location"])
         expected = np.array(view["result"]["trajectory"]["M"])
         assert np.allclose(member["trajectory"]["M"], expected, rtol=0, atol=1e-13)
 
@@ -107,7 +98,7 @@ def test_a_member_that_blows_up_fails_alone(client):
             "members": {"initial_states": [STATE, {"M": [1e200, 1e200, 0.0], "gamma": [0.0, 0.6, 0.8]}, STATE]}}
     r = client.post("/v1/ensembles", json=body)
     assert r.status_code == 202, r.text
-    view = _finish(client, r.headers["location"])
+    view = poll_job(client, r.headers["location"])
     assert view["status"] == "succeeded"
     assert view["summary"]["succeeded"] == 2 and view["summary"]["failed"] == 1
     members = _members(client, r.json()["id"])

@@ -18,6 +18,7 @@ import redis
 from tests.support import (
     TEST_REDIS_URL,
     free_port,
+    poll_job,
     redis_available,
     start_api,
     start_worker,
@@ -54,16 +55,6 @@ def stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, subproc
     finally:
         stop(api)
         stop(worker)
-
-
-def _finish(client: httpx.Client, location: str, timeout: float) -> dict:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        view = client.get(location).json()
-        if view["status"] in ("succeeded", "cancelled", "failed"):
-            return view
-        time.sleep(0.1)
-    raise TimeoutError(location)
 
 
 def _all_members(client: httpx.Client, ensemble_id: str) -> list[dict]:
@@ -119,7 +110,7 @@ def test_cancel_stops_every_chunk_within_a_second(stack):
     # both processes are free again: a small ensemble finishes promptly
     small = {"system": BALL, "t_final": 10.0, "members": {"sample": {"count": 8, "level": {"energy": 1.0}}}}
     start = time.monotonic()
-    view = _finish(client, client.post("/v1/ensembles", json=small).headers["location"], 60)
+    view = poll_job(client, client.post("/v1/ensembles", json=small).headers["location"], 60)
     assert view["status"] == "succeeded" and time.monotonic() - start < 20
 
 
@@ -135,7 +126,7 @@ def test_a_worker_process_killed_mid_chunk_loses_no_member_and_counts_none_twice
     assert children, "the worker has no pool processes"
     for pid in children[:1]:
         os.kill(pid, signal.SIGKILL)
-    view = _finish(client, location, 400)
+    view = poll_job(client, location, 400)
     assert view["status"] == "succeeded", view
     assert view["chunks"]["done"] == 4 and view["members_done"] == 16
     assert view["chunks"]["reruns"] >= 1  # the killed chunk ran again ...
