@@ -125,6 +125,10 @@ class EnsembleRequest(BaseModel):
             found.append(FieldProblem("samples", f"members x samples = {count} x {self.samples} = "
                                                  f"{count * self.samples} exceeds this service's maximum "
                                                  f"{settings.max_ensemble_values}; ask for fewer samples"))
+        if self.poincare is not None and count * self.poincare.max_points > settings.max_ensemble_section_points:
+            found.append(FieldProblem("poincare.max_points", f"members x max_points = {count} x "
+                                                             f"{self.poincare.max_points} exceeds this service's "
+                                                             f"maximum {settings.max_ensemble_section_points}"))
         found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov)
         if found:
             return found

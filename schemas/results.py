@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict
 from typing import Any
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from nonholonomic.analysis.ensemble import MemberResult
@@ -136,9 +137,14 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
     }
 
 
+#: An ensemble member's convergence series is thinned to this many rows (a job keeps ~1000).
+MEMBER_CONVERGENCE_ROWS = 100
+
+
 def member_to_json(member: MemberResult) -> dict[str, Any]:
     """One ensemble member as JSON: its index, label, initial state, status, and (when it succeeded)
-    the same result fields as a job without the ``system`` block the members share."""
+    the same result fields as a job without the ``system`` block the members share (the Lyapunov
+    convergence series thinned to :data:`MEMBER_CONVERGENCE_ROWS` rows)."""
     out: dict[str, Any] = {"index": member.index, "status": member.status, **({"label": dict(member.label)}
                                                                               if member.label else {})}
     if member.result is None:
@@ -147,5 +153,10 @@ def member_to_json(member: MemberResult) -> dict[str, Any]:
         return out
     body = result_to_json(member.result, {})
     del body["system"]
+    spectrum = body.get("lyapunov")
+    if spectrum and len(spectrum["convergence_t"]) > MEMBER_CONVERGENCE_ROWS:  # evenly thinned, the last kept
+        keep = np.unique(np.linspace(0, len(spectrum["convergence_t"]) - 1, MEMBER_CONVERGENCE_ROWS).round().astype(int))
+        spectrum["convergence_t"] = [spectrum["convergence_t"][i] for i in keep]
+        spectrum["convergence"] = [spectrum["convergence"][i] for i in keep]
     out.update(body)
     return out

@@ -24,6 +24,8 @@ class Settings(BaseSettings):
     max_ensemble_members: int = Field(100_000, ge=1, description="largest number of members of one ensemble")
     max_ensemble_values: int = Field(2_000_000, ge=1,
                                      description="largest members x samples of one ensemble (what its results hold)")
+    max_ensemble_section_points: int = Field(10_000_000, ge=1,
+                                             description="largest members x poincare.max_points of one ensemble")
     job_soft_time_limit_s: float = Field(600.0, gt=0)
     job_time_limit_s: float = Field(660.0, gt=0)
     visibility_timeout_s: float = Field(3600.0, gt=0, description="broker redelivery timeout (> time limits)")

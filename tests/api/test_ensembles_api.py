@@ -56,6 +56,8 @@ def test_sampled_ensemble_on_one_level_with_section_and_exponents(client):
         # U = 0 is integrable: the largest exponent is small and falling (a bound, not zero, at t = 60)
         assert abs(m["lyapunov"]["exponents"][0]) < 0.2
         assert m["poincare"]["count"] >= 1 and m["poincare"]["surface_residual_max"] <= 1e-13
+        series = m["lyapunov"]["convergence_t"]  # thinned for members, ending at t_final
+        assert len(series) <= 100 and series[-1] == 60.0
     # the export: one row per crossing, the member index first, every state component
     text = client.get(f"/v1/ensembles/{accepted['id']}/poincare", params={"format": "csv"}).text
     rows = list(csv.reader(io.StringIO(text)))
@@ -134,6 +136,10 @@ def test_limits_and_analysis_blocks_are_422s_naming_the_field(client):
     assert error["field"] == "poincare.surface" and "zeta" in error["reason"] and "position 9" in error["reason"]
     r = client.post("/v1/ensembles", json={**base, "lyapunov": {"count": 7}})
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "lyapunov.count"
+    many = {**big, "samples": 2, "poincare": {"surface": "gamma3", "max_points": 100_000},
+            "members": {"sample": {"count": 101, "level": {"energy": 1.0}}}}
+    r = client.post("/v1/ensembles", json=many)
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "poincare.max_points"
 
 
 def test_unknown_ensemble_is_404(client):
