@@ -325,7 +325,7 @@ def _parse_csv(text: str) -> dict[int, dict[str, np.ndarray]]:
     member = data[:, 0].astype(int)
     for m in np.unique(member):
         block = data[member == m]
-        out[int(m)] = {name: block[:, j] for j, name in enumerate(header) if j > 0}
+        out[int(m)] = {name.split(" [")[0]: block[:, j] for j, name in enumerate(header) if j > 0}  # "M1 [unit]"
     return out
 
 

@@ -65,22 +65,35 @@ def _section_members(store: EnsembleStore, ensemble_id: str,
                 yield member["index"], member["poincare"]
 
 
-def _columns(section: dict[str, Any]) -> list[tuple[str, str, int | None]]:
-    """(column name, key in the section, component) for t, tau, every point vector's components."""
-    cols: list[tuple[str, str, int | None]] = [("t", "t", None)]
+def _units(request: dict[str, Any]) -> dict[str, str]:
+    """Units of t, τ and every state and derived vector of the ensemble's system."""
+    from schemas.ensembles import EnsembleRequest
+
+    system = EnsembleRequest.model_validate(request).definition()
+    units = {"t": "s", **({"tau": system.reduced_time.unit} if system.reduced_time else {})}
+    units.update({v.name: v.unit for v in system.state})
+    units.update({d.name: d.unit for d in system.derived})
+    return units
+
+
+def _columns(section: dict[str, Any], units: dict[str, str]) -> list[tuple[str, str, int | None]]:
+    """(column header ``name [unit]``, key in the section, component) for t, tau, every point vector's components."""
+    cols: list[tuple[str, str, int | None]] = [(f"t [{units['t']}]", "t", None)]
     if section.get("tau") is not None:
-        cols.append(("tau", "tau", None))
+        cols.append((f"tau [{units.get('tau', '')}]", "tau", None))
     for name, values in section["points"].items():
         width = len(values[0]) if values else 3
-        cols += [(f"{name}{k + 1}", name, k) for k in range(width)]
+        cols += [(f"{name}{k + 1} [{units.get(name, '')}]", name, k) for k in range(width)]
     return cols
 
 
 def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> Iterator[str]:
-    """Every member's crossings as CSV, one row per crossing, the member index first (streamed a chunk at a time)."""
+    """Every member's crossings as CSV, one row per crossing, the member index first, a header naming
+    each column and its unit (streamed a member at a time)."""
     header_written = False
+    units = _units(record["request"])
     for index, section in _section_members(store, ensemble_id, record):
-        cols = _columns(section)
+        cols = _columns(section, units)
         buffer = io.StringIO()
         writer = csv.writer(buffer)
         if not header_written:
@@ -91,12 +104,12 @@ def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
                                       for _, key, k in cols]])
         yield buffer.getvalue()
     if not header_written:
-        yield "member,t\n"
+        yield f"member,t [{units['t']}]\n"
 
 
 def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> bytes:
     """Every member's crossings as NPZ arrays (``member``, ``t``, ``tau``, each point vector ``(n, 3)``),
-    with the request as JSON in ``request_json``."""
+    with the request and the units as JSON in ``request_json`` and ``units_json``."""
     parts: dict[str, list[np.ndarray]] = {"member": []}
     for index, section in _section_members(store, ensemble_id, record):
         parts["member"].append(np.full(section["count"], index, dtype=np.int64))
@@ -107,5 +120,6 @@ def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
             parts.setdefault(name, []).append(np.asarray(values, dtype=float).reshape(-1, 3))
     arrays = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
     buffer = io.BytesIO()
-    np.savez(buffer, **arrays, request_json=np.array(json.dumps(record["request"])))
+    np.savez(buffer, **arrays, request_json=np.array(json.dumps(record["request"])),
+             units_json=np.array(json.dumps(_units(record["request"]))))
     return buffer.getvalue()

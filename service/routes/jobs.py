@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
-from fastapi import APIRouter, Request, Response
-from fastapi.responses import JSONResponse
+from fastapi import APIRouter, Query, Request, Response
+from fastapi.responses import JSONResponse, StreamingResponse
 
 from schemas.jobs import JobAccepted, JobRequest, JobView
 from schemas.problems import CONFLICT, NOT_FOUND, FieldError, Problem
 from service.backends import JobBackend, JobRecord
 from service.errors import ProblemError, invalid_request
+from service.exports import trajectory_csv, trajectory_npz
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 _ERRORS: dict[int | str, dict[str, Any]] = {
@@ -50,6 +51,26 @@ def submit_job(job: JobRequest, request: Request, response: Response) -> JobAcce
 @router.get("/{job_id}", response_model=JobView, responses=_ERRORS, summary="Status, progress and result of a job")
 def get_job(job_id: str, request: Request) -> JSONResponse:
     return JSONResponse(_view(_found(_backend(request).get(job_id), job_id)))
+
+
+@router.get("/{job_id}/trajectory", responses={**_ERRORS, 409: {"model": Problem, "description": "the job has not "
+                                                                                              "succeeded (yet)"}},
+            summary="The sampled trajectory as JSON, CSV (a header with units; t and tau first) or NPZ")
+def get_trajectory(job_id: str, request: Request,
+                   format: Literal["json", "csv", "npz"] = Query("json")) -> Response:  # noqa: A002
+    record = _found(_backend(request).get(job_id), job_id)
+    if record.status != "succeeded" or record.result is None:
+        raise ProblemError(409, "No trajectory yet", f"job {job_id} is {record.status}; its trajectory is there once "
+                                                     "it succeeded", CONFLICT)
+    if "trajectory" not in record.result:
+        raise ProblemError(409, "No trajectory", f"job {job_id} is a paper report, not a simulation", CONFLICT)
+    headers = {"Content-Disposition": f'attachment; filename="job-{job_id}-trajectory.{format}"'}
+    if format == "csv":
+        return StreamingResponse(trajectory_csv(record.result), media_type="text/csv", headers=headers)
+    if format == "npz":
+        return Response(trajectory_npz(record.result, record.request), media_type="application/octet-stream",
+                        headers=headers)
+    return JSONResponse({"units": record.result["system"]["units"], **record.result["trajectory"]})
 
 
 @router.delete("/{job_id}", response_model=JobView,

@@ -61,9 +61,10 @@ def test_sampled_ensemble_on_one_level_with_section_and_exponents(client):
     # the export: one row per crossing, the member index first, every state component
     text = client.get(f"/v1/ensembles/{accepted['id']}/poincare", params={"format": "csv"}).text
     rows = list(csv.reader(io.StringIO(text)))
-    assert rows[0][:3] == ["member", "t", "tau"] and "gamma3" in rows[0] and "omega1" in rows[0]
+    assert rows[0][:3] == ["member", "t [s]", "tau [s (kg m^2)^(-3/2)]"]
+    assert "gamma3 [1]" in rows[0] and "omega1 [rad/s]" in rows[0] and "M1 [kg m^2/s]" in rows[0]
     assert len(rows) - 1 == sum(m["poincare"]["count"] for m in members)
-    col = rows[0].index("gamma3")
+    col = rows[0].index("gamma3 [1]")
     assert max(abs(float(row[col])) for row in rows[1:]) <= 1e-13
     npz = np.load(io.BytesIO(client.get(f"/v1/ensembles/{accepted['id']}/poincare",
                                         params={"format": "npz"}).content))
