@@ -24,8 +24,6 @@ from schemas.settings import get_settings
 from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
 
 ENSEMBLE_JOB = "ensemble"
-#: Lanes of heyoka's batch mode a chunk size is rounded to.
-BATCH_LANES = 4
 _PATH = re.compile(r"^(?:potential\.)?([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
 
 
@@ -106,7 +104,7 @@ class EnsembleRequest(BaseModel):
         system = self.definition()
         return self.chunk_size or default_chunk_size(
             system, self.t_final, poincare=self.poincare.options() if self.poincare else None,
-            lyapunov=self.lyapunov.options() if self.lyapunov else None, lanes=BATCH_LANES)
+            lyapunov=self.lyapunov.options() if self.lyapunov else None)
 
     def chunks(self) -> list[tuple[int, int]]:
         """``(start, stop)`` of every chunk."""

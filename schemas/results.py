@@ -9,6 +9,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from nonholonomic.analysis.ensemble import MemberResult
+from nonholonomic.definition import MechanicalSystem
 from nonholonomic.simulation import SimulationResult
 from schemas.analysis import section_to_json, spectrum_to_json
 
@@ -103,16 +104,23 @@ class SimulationResultModel(BaseModel):
     lyapunov: dict[str, Any] | None = Field(None, description="the Lyapunov spectrum, when asked for")
 
 
+def system_units(system: MechanicalSystem) -> dict[str, str]:
+    """Units of t, τ, every state and derived vector and every parameter group of ``system``."""
+    reduced = system.reduced_time
+    units = {"t": "s", **({"tau": reduced.unit} if reduced else {})}
+    units.update({v.name: v.unit for v in system.state})
+    units.update({d.name: d.unit for d in system.derived})
+    units.update({p.name: p.unit for p in system.parameters})
+    return units
+
+
 def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict[str, Any]:
     """The JSON form of a core :class:`~nonholonomic.simulation.SimulationResult`."""
     system = result.system
     traj = result.trajectory
     vectors = [v.name for v in system.state] + [d.name for d in system.derived]
     reduced = system.reduced_time
-    units = {"t": "s", **({"tau": reduced.unit} if reduced else {})}
-    units.update({v.name: v.unit for v in system.state})
-    units.update({d.name: d.unit for d in system.derived})
-    units.update({p.name: p.unit for p in system.parameters})
+    units = system_units(system)
     samples = {name: result.state(name).tolist() for name in vectors}
     return {
         "system": {"kind": system.kind, "title": system.title, "equation": system.equation,

@@ -13,6 +13,8 @@ from typing import Any
 import numpy as np
 
 from nonholonomic.analysis.ensemble import summarize
+from nonholonomic.systems import get_system
+from schemas.results import system_units
 from workers.ensembles import EnsembleStore
 
 
@@ -66,14 +68,9 @@ def _section_members(store: EnsembleStore, ensemble_id: str,
 
 
 def _units(request: dict[str, Any]) -> dict[str, str]:
-    """Units of t, τ and every state and derived vector of the ensemble's system."""
-    from schemas.ensembles import EnsembleRequest
-
-    system = EnsembleRequest.model_validate(request).definition()
-    units = {"t": "s", **({"tau": system.reduced_time.unit} if system.reduced_time else {})}
-    units.update({v.name: v.unit for v in system.state})
-    units.update({d.name: d.unit for d in system.derived})
-    return units
+    """Units of the ensemble's system (read off its kind and potential; the members are not revalidated)."""
+    system = request["system"]
+    return system_units(get_system(system["kind"], system["potential"]["kind"]))
 
 
 def _columns(section: dict[str, Any], units: dict[str, str]) -> list[tuple[str, str, int | None]]:

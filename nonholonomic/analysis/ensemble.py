@@ -14,6 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import heyoka as hy
 import numpy as np
 
 from nonholonomic.analysis.options import SectionOptions, SpectrumOptions
@@ -77,8 +78,10 @@ class MemberResult:
 
 
 def default_chunk_size(system: MechanicalSystem, t_final: float, *, poincare: SectionOptions | None = None,
-                       lyapunov: SpectrumOptions | None = None, lanes: int = 4) -> int:
-    """Members per chunk for about :data:`CHUNK_SECONDS` of work, a multiple of ``lanes`` (the SIMD batch)."""
+                       lyapunov: SpectrumOptions | None = None, lanes: int | None = None) -> int:
+    """Members per chunk for about :data:`CHUNK_SECONDS` of work, a multiple of ``lanes`` (by default
+    heyoka's SIMD batch size, the lanes :func:`~nonholonomic.integration.integrate_batch` fills)."""
+    lanes = lanes or hy.recommended_simd_size()
     per_unit_time = SECONDS_PER_UNIT_TIME * (1 + SECTION_FACTOR * (poincare is not None))
     if lyapunov is not None:  # the orbit with its whole tangent matrix, a QR every interval
         per_unit_time += LYAPUNOV_SECONDS_PER_UNIT_TIME * max(1.0, 1.0 / lyapunov.interval)

@@ -26,10 +26,10 @@ def test_plan_refuses_empty_requests(count, size):
 
 def test_default_chunk_size_is_a_multiple_of_the_lanes_and_shrinks_with_the_work():
     ball = get_system("chaplygin_ball", "zero")
-    plain = default_chunk_size(ball, 100.0)
-    with_section = default_chunk_size(ball, 100.0, poincare=SectionOptions("gamma3"))
-    with_exponents = default_chunk_size(ball, 100.0, lyapunov=SpectrumOptions(1))
-    longer = default_chunk_size(ball, 1e4, lyapunov=SpectrumOptions(1))
+    plain = default_chunk_size(ball, 100.0, lanes=4)
+    with_section = default_chunk_size(ball, 100.0, poincare=SectionOptions("gamma3"), lanes=4)
+    with_exponents = default_chunk_size(ball, 100.0, lyapunov=SpectrumOptions(1), lanes=4)
+    longer = default_chunk_size(ball, 1e4, lyapunov=SpectrumOptions(1), lanes=4)
     assert all(s % 4 == 0 for s in (plain, with_section, with_exponents, longer))
     assert plain > with_section > with_exponents > longer == 4
     assert 2000 <= plain <= 4096  # ~3500 trajectories of t = 100 per second
