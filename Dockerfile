@@ -1,12 +1,16 @@
 # One image for the API and the worker (docker-compose.yml chooses the command).
 FROM python:3.11-slim
 ENV PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1
+# The commit results name in integration.project (the image has no .git): --build-arg GIT_COMMIT=$(git rev-parse HEAD)
+ARG GIT_COMMIT=
+ENV NONHOLONOMIC_GIT_COMMIT=${GIT_COMMIT}
 WORKDIR /app
 COPY pyproject.toml README.md ./
 COPY nonholonomic ./nonholonomic
 COPY schemas ./schemas
 COPY service ./service
 COPY workers ./workers
+COPY client ./client
 RUN pip install --no-cache-dir . && useradd --create-home app
 USER app
 EXPOSE 8000

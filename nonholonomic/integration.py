@@ -197,7 +197,9 @@ def _taylor(system: MechanicalSystem) -> TaylorSystem:
 
 
 def _versions() -> dict[str, str]:
-    return {"heyoka": hy.__version__, "numpy": np.__version__, "scipy": scipy.__version__}
+    import sympy
+
+    return {"heyoka": hy.__version__, "sympy": sympy.__version__, "numpy": np.__version__, "scipy": scipy.__version__}
 
 
 def _sample_grid(t_final: float, samples: int) -> np.ndarray:

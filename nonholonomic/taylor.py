@@ -203,10 +203,21 @@ class _Parameters:
             return hy.par[self.index[expr]]
         if expr not in self.where:
             if self.frozen:
-                return hy.from_sympy(expr, self.mapping)
+                return from_sympy(expr, self.mapping)
             self.where[expr] = len(self.symbols) + len(self.derived)
             self.derived.append(expr)
         return hy.par[self.where[expr]]
+
+
+def from_sympy(expr: sp.Expr, mapping: dict[sp.Symbol, hy.expression]) -> hy.expression:
+    """``hy.from_sympy`` that also knows ``Abs`` (heyoka has no |x|): each ``Abs(x)`` becomes a
+    placeholder for heyoka's ``sqrt(x**2)`` (e.g. the scale ``|c|`` of an integral of Neumann's
+    system; sympy itself would fold ``sqrt(x**2)`` back into ``Abs`` for a real ``x``)."""
+    absolutes = {a: sp.Dummy("abs") for a in expr.atoms(sp.Abs)}
+    if not absolutes:
+        return hy.from_sympy(expr, mapping)
+    inner = {d: hy.sqrt(from_sympy(a.args[0], mapping) ** 2) for a, d in absolutes.items()}
+    return hy.from_sympy(expr.xreplace(absolutes), {**mapping, **inner})
 
 
 # --- heyoka expressions with shared nodes --------------------------------------------------------
@@ -277,7 +288,7 @@ class _Emitter:
     def function(self, func: type, args: list[int]) -> int:
         def make() -> hy.expression:
             dummies = [sp.Dummy() for _ in args]
-            return hy.from_sympy(func(*dummies), {d: self.exprs[a] for d, a in zip(dummies, args)})
+            return from_sympy(func(*dummies), {d: self.exprs[a] for d, a in zip(dummies, args)})
         return self._node(("f", str(func), tuple(args)), make)
 
     def product(self, factors: list[int]) -> int | None:

@@ -20,6 +20,7 @@ from nonholonomic.initial_state import FieldProblem, initial_state_problems, pro
 from nonholonomic.kernels import parameter_vector, state_vector
 from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems, t_final_within_limit
+from schemas.results import MemberResultModel
 from schemas.settings import get_settings
 from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
 
@@ -271,3 +272,12 @@ class EnsembleView(BaseModel):
     chunks: dict[str, Any] = Field(description="total, done, and the workers that ran them")
     summary: dict[str, Any] | None = Field(description="members succeeded/failed, worst integral drift, exponent "
                                                        "statistics, section points (over the members done so far)")
+
+
+class MembersPage(BaseModel):
+    """``GET /v1/ensembles/{id}/members``: members ``offset .. offset + limit - 1`` whose chunk is done."""
+
+    offset: int
+    limit: int
+    total: int = Field(description="members of the ensemble")
+    members: list[MemberResultModel]

@@ -60,3 +60,11 @@ class PaperReport(BaseModel):
     rows: list[ReportRow]
     seconds: float
     verdicts: dict[str, str]
+
+
+class ClaimList(BaseModel):
+    """``GET /v1/paper/claims``: the ids ``POST /v1/paper/report`` accepts in ``claims``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    claims: list[str]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -49,7 +49,9 @@ class IntegrationInfo(BaseModel):
     tolerance: float
     steps: int
     wall_time_s: float = Field(description="integration only (compilation is once per worker process)")
-    versions: dict[str, str]
+    versions: dict[str, str] = Field(description="heyoka, sympy, numpy and scipy that computed this result")
+    project: dict[str, str | None] | None = Field(
+        None, description="the service that computed it: name, version, and the git commit when there is one")
 
 
 class TimeInfo(BaseModel):
@@ -168,3 +170,34 @@ def member_to_json(member: MemberResult) -> dict[str, Any]:
         spectrum["convergence"] = [spectrum["convergence"][i] for i in keep]
     out.update(body)
     return out
+
+
+class TrajectoryExport(Trajectory):
+    """``GET /v1/jobs/{id}/trajectory?format=json``: the samples with the unit of every column."""
+
+    units: dict[str, str] = Field(description="unit of t, tau, every vector and parameter group")
+
+
+class MemberResultModel(BaseModel):
+    """One ensemble member: its index, label and status; when it succeeded the fields of a job's result
+    (without ``system``, shared by the members); when it failed the reason (and its initial state, as
+    the flat state vector, when the member got that far)."""
+
+    index: int
+    status: Literal["succeeded", "failed"]
+    label: dict[str, Any] | None = Field(None, description="what sets the member apart, e.g. {'parameter': 'D', "
+                                                           "'value': 0.5} in a sweep")
+    error: str | None = Field(None, description="why it failed")
+    initial_state: dict[str, list[float]] | list[float] | None = None
+    projections: list[ProjectionItem] | None = None
+    final_state: dict[str, list[float]] | None = None
+    t_final: float | None = None
+    tau_final: float | None = None
+    time: TimeInfo | None = None
+    trajectory: Trajectory | None = None
+    integrals: list[IntegralItem] | None = None
+    checks: list[CheckItem] | None = None
+    integration: IntegrationInfo | None = None
+    warnings: list[str] | None = None
+    poincare: dict[str, Any] | None = None
+    lyapunov: dict[str, Any] | None = None

@@ -1,4 +1,4 @@
-"""Requests of the symbolic endpoints: ``POST /v1/brackets/verify`` and ``POST /v1/hamiltonize``.
+"""Requests and answers of the symbolic endpoints: ``POST /v1/brackets/verify`` and ``POST /v1/hamiltonize``.
 
 Every expression is a string parsed by :mod:`nonholonomic.expressions` (a whitelist over Python's
 AST; never eval): declared names, numbers, + − * / ** and named functions (sin, cos, sqrt ...).
@@ -6,7 +6,7 @@ AST; never eval): declared names, numbers, + − * / ** and named functions (sin
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -76,3 +76,135 @@ class HamiltonizeRequest(BaseModel):
     budget_s: float = Field(20.0, gt=0, le=MAX_BUDGET_S)
     monopole: MonopoleRequest | None = Field(
         None, description="integrate S_bar dq1^dq2 over a chart: exact (integral 0) or a monopole")
+
+
+# --------------------------------------------------------------------------------------------------
+# responses
+
+
+class _Answer(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class AntisymmetryEntry(_Answer):
+    """An entry of the matrix whose P_ij + P_ji is not (or not provably) zero."""
+
+    entry: list[int] = Field(description="[i, j]")
+    bracket: str
+    sum: str = Field(description="P_ij + P_ji, expanded (cut at 200 characters)")
+    status: Literal["non-zero", "undecided"]
+
+
+class AntisymmetryCheck(_Answer):
+    passed: bool
+    method: Literal["symbolic", "pointwise"]
+    residual: float | None = Field(description="max |P_ij + P_ji| / (|P_ij| + |P_ji|) at the sample points "
+                                               "(null if not finite)")
+    offending: list[AntisymmetryEntry]
+    detail: str
+
+
+class BracketCheck(_Answer):
+    """A verdict (Jacobi identity, a Casimir) with how it was reached."""
+
+    method: Literal["symbolic", "pointwise"]
+    passed: bool
+    residual: float | None = Field(description="pointwise relative residual |sum of terms| / sum |terms|, max over "
+                                               "the sample points (null if not finite)")
+    detail: str
+
+
+class CasimirCheck(BracketCheck):
+    name: str
+
+
+class BracketRank(_Answer):
+    values: list[int] = Field(description="rank of the matrix at each random point where it is finite")
+    generic: int | None = Field(description="the largest rank seen")
+
+
+class BracketVerifyResult(_Answer):
+    """Answer to ``POST /v1/brackets/verify``."""
+
+    variables: list[str]
+    convention: str
+    dimension: int
+    antisymmetric: AntisymmetryCheck
+    jacobi: BracketCheck
+    casimirs: list[CasimirCheck]
+    rank: BracketRank
+
+
+class HamiltonizeBracket(_Answer):
+    """The bracket of eq. 2704-9 in (q, p)."""
+
+    name: str
+    equation: str
+    variables: list[str]
+    matrix: list[list[str]]
+    formula: str
+    convention: str
+
+
+class HamiltonizeVerification(_Answer):
+    """Whether the τ-flow is Hamiltonian with the multiplier found."""
+
+    method: Literal["symbolic", "pointwise"]
+    residual: float | None = Field(description="max relative residual at the sample points (null if not finite)")
+    passed: bool | None = Field(description="null when there is no multiplier to verify")
+    detail: str
+    pointwise_residual_brackets_py_convention: float | None = Field(None, description="null if not finite")
+    symbolic: bool | None = None
+
+
+class MonopoleResult(_Answer):
+    """The integral of the gyroscopic 2-form S̄ dq₁∧dq₂ over the chart (exact iff 0)."""
+
+    integral: float | None
+    exact: bool | None
+    detail: str
+    absolute_integral: float | None = None
+    error_estimate: float | None = None
+    form: str | None = Field(None, description="the integrand")
+    integral_S_bar: float | None = Field(None, description="with a shift: the chart integral of S_bar alone")
+    symbolic: str | None = Field(None, description="sympy's exact integral, when it found one")
+
+
+class HamiltonizeResult(_Answer):
+    """Answer to ``POST /v1/hamiltonize``: Theorem 1 for the posted system (expressions as sympy strings)."""
+
+    A1: str = Field(description="S = A1 P1 + A2 P2 + B (eq. 2704-10)")
+    A2: str
+    B: str
+    measure_exists: bool | None = Field(description="null: undecided within the budget")
+    integrability_condition: str
+    reason: str
+    density: str | None
+    reducing_multiplier: str | None
+    S_bar: str | None = Field(description="S_bar = N B (ERRATA 6)")
+    hamiltonian: str | None = Field(description="H_bar(q, p)")
+    momenta: list[str]
+    bracket: HamiltonizeBracket | None
+    verification: HamiltonizeVerification
+    monopole: MonopoleResult | None
+    equations: dict[str, str]
+    convention: str
+
+
+class HamiltonizeExample(_Answer):
+    """A ready-to-post ``POST /v1/hamiltonize`` body (add ``parameters`` for the constants if you like)."""
+
+    lagrangian: str
+    a1: str
+    a2: str
+    b: str
+    coordinates: list[str]
+    velocities: list[str]
+    symbols: list[str]
+    monopole: MonopoleRequest | None = None
+
+
+class HamiltonizeExamples(_Answer):
+    """``GET /v1/hamiltonize/examples``: by name (``veselova``, ``chaplygin_ball``)."""
+
+    examples: dict[str, HamiltonizeExample]

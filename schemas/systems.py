@@ -56,10 +56,32 @@ class PotentialSpec(BaseModel):
         return self.model_dump(exclude={"kind"})
 
 
+#: Declared after ``D`` in the JSON schema of the ball kinds, so that generated clients keep the attribute ``D``.
+_LOWER_D = {"not": {}, "description": "not a field (always refused): the parameter is upper-case D, the paper's "
+                                      "D = m R^2. Declared so that generated clients name D's attribute 'D'."}
+
+
+def _keep_client_names(schema: dict[str, Any], cls: type) -> None:
+    """Guard generated clients against a name clash of the paper's ``D``.
+
+    openapi-python-client (0.29) names a property's attribute by snake-casing its key, so ``D`` becomes
+    ``d``, and its generated ``from_dict`` parses into a local dict that is also called ``d``: the line
+    ``d = d.pop("D")`` replaces the dict by the number, the next ``d.pop("potential", ...)`` raises
+    AttributeError, and the union parser of ``system`` then rejects every ball (chaplygin_ball,
+    chaplygin_ball_veselova, rubber_ball). Two keys with the same snake-case name make the generator keep
+    both keys verbatim instead, so ``D`` stays ``D``. The second key ``d`` is declared with the schema
+    ``{"not": {}}``, which no value satisfies (``extra="forbid"`` refuses it already), and last, so it is
+    parsed after every real field. The request format is unchanged.
+    """
+    properties = schema.get("properties", {})
+    if "D" in properties and "d" not in properties:
+        properties["d"] = dict(_LOWER_D)
+
+
 class SystemSpec(BaseModel):
     """Base of the system models: ``kind``, the system's parameters and ``potential``."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_keep_client_names)
 
     def parameter_values(self) -> dict[str, Any]:
         """Every parameter group by name, the potential's included (the core's input)."""

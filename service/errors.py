@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import redis
@@ -16,6 +16,37 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from schemas.problems import INTERNAL, INVALID_REQUEST, PROBLEM_MEDIA_TYPE, UNAVAILABLE, FieldError, Problem
 
 log = logging.getLogger(__name__)
+
+#: Descriptions shared by many routes (``problem_responses({422: INVALID, 503: UNAVAILABLE_BACKEND})``).
+INVALID = "invalid request (nothing is done); `errors` names each offending field"
+UNAVAILABLE_BACKEND = "queue mode: the job store or broker cannot be reached; retry later"
+#: The schema every problem response declares (``Problem`` is put in the components by service.openapi).
+PROBLEM_SCHEMA_REF = "#/components/schemas/Problem"
+#: FastAPI's 400 for a JSON body it cannot read at all (not UTF-8): answered as the 422 of any bad JSON body.
+_BODY_NOT_PARSED = "There was an error parsing the body"
+#: Media types whose bodies are not text: declared as binary strings.
+_BINARY_MEDIA_TYPES = ("application/octet-stream", "image/png")
+
+
+def problem_responses(described: Mapping[int, str]) -> dict[int | str, dict[str, Any]]:
+    """The ``responses=`` of a route for the problems it answers: each status with its description and
+    an ``application/problem+json`` body of the ``Problem`` schema.
+
+    >>> problem_responses({404: "unknown job id"})[404]["content"]
+    {'application/problem+json': {'schema': {'$ref': '#/components/schemas/Problem'}}}
+    """
+    return {status: {"description": text, "content": {PROBLEM_MEDIA_TYPE: {"schema": {"$ref": PROBLEM_SCHEMA_REF}}}}
+            for status, text in described.items()}
+
+
+def media_responses(media_types: Iterable[str], description: str, status: int = 200) -> dict[int | str, dict[str, Any]]:
+    """The ``responses=`` entry of a route answering non-JSON bodies (CSV, NPZ, PNG, SVG, HTML): one
+    string schema per media type, binary where the body is not text. Give the route
+    ``response_class=Response`` (unless it also answers JSON) so FastAPI adds no ``application/json``."""
+    content = {media_type: {"schema": {"type": "string", **({"format": "binary"} if media_type in _BINARY_MEDIA_TYPES
+                                                            else {})}}
+               for media_type in media_types}
+    return {status: {"description": description, "content": content}}
 
 
 class ProblemError(Exception):
@@ -60,7 +91,10 @@ def _respond(problem: Problem, request: Request) -> JSONResponse:
 
 
 def install_error_handlers(app: FastAPI) -> None:
-    """Answer every error as ``application/problem+json``."""
+    """Answer every error as ``application/problem+json`` (and say so in the OpenAPI document)."""
+    from service.openapi import install_openapi
+
+    install_openapi(app)
 
     @app.exception_handler(ProblemError)
     async def _problem(request: Request, exc: ProblemError) -> JSONResponse:
@@ -84,6 +118,10 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        if exc.status_code == 400 and exc.detail == _BODY_NOT_PARSED:  # e.g. bytes that are not UTF-8
+            cause = exc.__cause__
+            reason = "body is not valid JSON" + (f": {cause}" if cause is not None else "")
+            return _respond(invalid_request([FieldError(field="body", reason=reason)]).problem, request)
         title = {404: "Not Found", 405: "Method Not Allowed"}.get(exc.status_code, "HTTP error")
         return _respond(Problem(title=title, status=exc.status_code, detail=str(exc.detail)), request)
 

@@ -9,12 +9,13 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from fastapi_offline import FastAPIOffline
 
 import nonholonomic
 from schemas.settings import Settings, get_settings
 from service.backends import make_backend
 from service.errors import install_error_handlers
-from service.routes import ensembles, health, jobs, maps, report, symbolic, systems
+from service.routes import ensembles, health, jobs, maps, pages, report, symbolic, systems
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -28,7 +29,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             app.state.backend.close()
 
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs and /redoc from files in the package, no CDN
         title="nonholonomic",
         version=nonholonomic.__version__,
         summary="Nonholonomic mechanics with machine-checked evidence (Borisov & Mamaev, "
@@ -43,6 +44,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(symbolic.router)
     app.include_router(maps.router)
     app.include_router(report.router)
+    app.include_router(pages.router)
     return app
 
 

@@ -10,6 +10,7 @@ from nonholonomic.simulation import simulate
 from schemas.jobs import JobRequest
 from schemas.report import REPORT_JOB, PaperReportRequest
 from schemas.results import result_to_json
+from workers.provenance import project
 
 
 class InvalidJob(ValueError):
@@ -46,7 +47,9 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
         poincare=job.poincare.options() if job.poincare else None,
         lyapunov=job.lyapunov.options() if job.lyapunov else None,
     )
-    return result_to_json(result, parameters)
+    out = result_to_json(result, parameters)
+    out["integration"]["project"] = project()
+    return out
 
 
 def run_report(request: dict[str, Any], progress: ProgressCallback | None = None) -> dict[str, Any]:

@@ -14,8 +14,8 @@ from nonholonomic.integration import IntegrationCancelled
 from schemas.settings import get_settings
 from workers.celery_app import DEFAULT_REDIS_URL, app
 from workers.ensembles import RedisEnsembleStore, run_ensemble_chunk
-from workers.jobs import run_job
-from workers.registry import RedisJobRegistry
+from workers.jobs import InvalidJob, run_job
+from workers.registry import RedisJobRegistry, request_from_args
 
 #: Seconds between progress updates (and cancellation checks) of a running job.
 PROGRESS_INTERVAL_S = 0.2
@@ -48,13 +48,35 @@ class _Progress:
         return True
 
 
-@app.task(bind=True, name="nonholonomic.simulate")
-def simulate_job(self: Task, request: dict[str, Any]) -> dict[str, Any]:
-    """Run a simulation job (the request is a ``JobRequest`` as JSON); returns the result JSON."""
+class _JobTask(Task):
+    """Records the job's terminal status in the registry once Celery stored the outcome (``after_return``
+    runs after the result backend was written), so the job list need not read results."""
+
+    def after_return(self, status: str, retval: Any, task_id: str, args: Any, kwargs: Any, einfo: Any) -> None:
+        recorded = {states.SUCCESS: "succeeded", states.FAILURE: "failed"}.get(status)
+        if recorded is not None:
+            _registry().set_status(task_id, recorded)
+
+
+@app.task(bind=True, base=_JobTask, name="nonholonomic.simulate")
+def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
+    """Run a simulation job; returns the result JSON.
+
+    The one argument is the request: a ``JobRequest`` (or ``PaperReportRequest``) as a JSON object, or
+    a string holding that JSON. A job sent straight to the queue by a job-queue client
+    (``send_task("nonholonomic.simulate", args=[request], queue=...)``) is registered here when it
+    starts, unless the API registered it already (it keeps the API's record and cancellation flag).
+    Anything else fails with the reason (:class:`workers.jobs.InvalidJob`).
+    """
     job_id = self.request.id
-    if _registry().is_cancelled(job_id):
+    request, refused = request_from_args(args, kwargs)
+    registry = _registry()
+    registry.ensure(job_id, request)
+    if registry.is_cancelled(job_id):
         self.update_state(state=states.REVOKED)
         raise Ignore()
+    if refused is not None:
+        raise InvalidJob(refused)
     try:
         return run_job(request, _Progress(self, job_id))
     except IntegrationCancelled:

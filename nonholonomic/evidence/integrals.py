@@ -12,7 +12,7 @@ import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.integration import Trajectory
-from nonholonomic.kernels import numeric
+from nonholonomic.kernels import numeric, parameter_vector
 from nonholonomic.taylor import TaylorSystem, taylor_system
 
 #: The verdict's tolerance on the relative drift never goes below this.
@@ -169,3 +169,48 @@ def compiled_integrals(system: MechanicalSystem) -> tuple[hy.cfunc, TaylorSystem
     ts = taylor_system(system)
     exprs = [c.expression for c in system.integrals] + [c.scale for c in system.integrals]
     return hy.cfunc(ts.expressions(exprs), list(ts.variables[: ts.n_state])), ts
+
+
+def integral_series(system: MechanicalSystem, parameters: dict[str, object],
+                    states: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Every first integral of ``system`` and its natural scale at each phase point (e.g. along the samples).
+
+    Evaluated by :func:`compiled_integrals` (the heyoka compiled function of the same symbolic
+    integrals the evidence uses), so ``|I − I(0)| / max(|I(0)|, max scale)`` of these series is the
+    relative drift of :class:`IntegralEvidence` restricted to ``states``.
+
+    Parameters
+    ----------
+    system : the symbolic definition.
+    parameters : named parameter groups as a request gives them (``{"inertia": [..], "D": .., "a": [..]}``;
+        flattened by :func:`~nonholonomic.kernels.parameter_vector`).
+    states : shape ``(n, system.dimension)``: one phase point per row, columns in the order of
+        ``system.state_symbols``.
+
+    Returns
+    -------
+    dict
+        ``name → (values, scales)``, two arrays of shape ``(n,)`` per integral, in the system's order
+        (empty when the system claims no integral).
+
+    Raises
+    ------
+    KeyError
+        If a parameter group is missing.
+    ValueError
+        If a parameter group is malformed or ``states`` has the wrong number of columns.
+    """
+    X = np.atleast_2d(np.asarray(states, dtype=float))
+    if X.shape[1] != system.dimension:
+        raise ValueError(f"{system.kind} has {system.dimension} state variables, the states have {X.shape[1]} columns")
+    if not system.integrals:
+        return {}
+    k, n = len(system.integrals), X.shape[0]
+    if n == 0:
+        return {c.name: (np.empty(0), np.empty(0)) for c in system.integrals}
+    p = parameter_vector(system, parameters)
+    cf, ts = compiled_integrals(system)
+    runtime = ts.runtime_parameters(p)[:cf.nparams]
+    pars = np.ascontiguousarray(np.repeat(runtime[:, None], n, axis=1))  # one column per point
+    values = cf(np.ascontiguousarray(X.T), pars=pars)  # the integrals, then their scales
+    return {claim.name: (values[i].copy(), values[k + i].copy()) for i, claim in enumerate(system.integrals)}

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import base64
+import binascii
+import json
+import math
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -22,6 +26,33 @@ class JobRecord:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
+class InvalidCursor(ValueError):
+    """A ``cursor`` that no page of ``GET /v1/jobs`` gave out."""
+
+
+_CURSOR_TAG = "j1"
+
+
+def encode_cursor(score: float, job_id: str) -> str:
+    """The opaque cursor after the job ``job_id`` created at ``score`` (epoch seconds): a list is
+    ordered by (score, id) descending, and the next page starts strictly after this pair."""
+    raw = json.dumps([_CURSOR_TAG, score, job_id], separators=(",", ":")).encode()
+    return base64.urlsafe_b64encode(raw).decode().rstrip("=")
+
+
+def decode_cursor(cursor: str) -> tuple[float, str]:
+    """``(score, id)`` of a cursor from :func:`encode_cursor`; raises :class:`InvalidCursor`."""
+    try:
+        raw = base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4))
+        tag, score, job_id = json.loads(raw)
+    except (ValueError, TypeError, binascii.Error):
+        raise InvalidCursor("not a cursor given out by this list (use a page's next_cursor as it is)") from None
+    if (tag != _CURSOR_TAG or isinstance(score, bool) or not isinstance(score, (int, float))
+            or not math.isfinite(score) or not isinstance(job_id, str) or not job_id):
+        raise InvalidCursor("not a cursor given out by this list (use a page's next_cursor as it is)")
+    return float(score), job_id
+
+
 class JobBackend(Protocol):
     mode: str
     #: Where ensembles' records and member results live.
@@ -35,6 +66,15 @@ class JobBackend(Protocol):
 
     def cancel(self, job_id: str) -> JobRecord | None:
         """Ask the job to stop; returns it (None if unknown)."""
+
+    def list_jobs(self, status: str | None, limit: int, cursor: str | None) -> tuple[list[JobRecord], str | None]:
+        """Jobs newest first (without results), only those with ``status`` if given, at most ``limit``,
+        starting after ``cursor`` (a previous page's next cursor, None for the first page).
+
+        Returns the page and the cursor of the next one, None at the end. A page may be shorter than
+        ``limit`` (even empty) with a next cursor when a backend bounds how far it reads ahead for a
+        status filter. Raises :class:`InvalidCursor` for a cursor it did not give out.
+        """
 
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]]) -> tuple[str, str]:
         """Record a validated ensemble and send its chunks to the workers; returns (id, created_at)."""

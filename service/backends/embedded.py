@@ -13,7 +13,7 @@ from typing import Any
 from nonholonomic.integration import IntegrationCancelled
 from schemas.jobs import TERMINAL_STATUSES
 from schemas.settings import Settings
-from service.backends.base import JobRecord
+from service.backends.base import JobRecord, decode_cursor, encode_cursor
 from workers.ensembles import MemoryEnsembleStore, run_ensemble_chunk
 from workers.jobs import run_job, warm_up
 
@@ -109,6 +109,19 @@ class EmbeddedBackend:
                 self._cancel[job_id].set()
                 record.status = "cancelled"
         return record
+
+    def list_jobs(self, status: str | None, limit: int, cursor: str | None) -> tuple[list[JobRecord], str | None]:
+        """Newest first by (created_at, id); exact: the next cursor is None once nothing more matches."""
+        after = decode_cursor(cursor) if cursor is not None else None
+        with self._lock:
+            self._forget_expired()
+            keyed = sorted(((datetime.fromisoformat(r.created_at).timestamp(), r.id), r) for r in self._jobs.values())
+        keyed.reverse()
+        matching = [(key, r) for key, r in keyed
+                    if (after is None or key < after) and (status is None or r.status == status)]
+        page = matching[:limit]
+        more = len(matching) > limit
+        return [r for _, r in page], encode_cursor(*page[-1][0]) if more else None
 
     def health(self) -> dict[str, Any]:
         warm = self._warm.is_set()

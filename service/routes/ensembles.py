@@ -7,17 +7,24 @@ from typing import Any, Literal
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
 
-from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView
-from schemas.problems import CONFLICT, NOT_FOUND, FieldError, Problem
+from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView, MembersPage
+from schemas.problems import CONFLICT, NOT_FOUND, FieldError
 from service.backends import JobBackend
 from service.ensembles import members_page, section_csv, section_npz, view
-from service.errors import ProblemError, invalid_request
+from service.errors import (
+    INVALID,
+    UNAVAILABLE_BACKEND,
+    ProblemError,
+    invalid_request,
+    media_responses,
+    problem_responses,
+)
+from service.openapi import operation_id
 
-router = APIRouter(prefix="/v1/ensembles", tags=["ensembles"])
-_ERRORS: dict[int | str, dict[str, Any]] = {
-    404: {"model": Problem, "description": "unknown ensemble id"},
-    422: {"model": Problem, "description": "invalid request; `errors` names each field"},
-}
+#: Operation ids are explicit, ``ensembles-<verb>``; a route without one gets ``ensembles-<its name>``.
+router = APIRouter(prefix="/v1/ensembles", tags=["ensembles"], generate_unique_id_function=operation_id)
+#: The problems of a route that reads one ensemble.
+_ERRORS: dict[int | str, dict[str, Any]] = problem_responses({404: "unknown ensemble id", 503: UNAVAILABLE_BACKEND})
 #: Most members one page returns.
 MAX_PAGE = 1000
 
@@ -33,7 +40,8 @@ def _record(request: Request, ensemble_id: str) -> dict[str, Any]:
     return record
 
 
-@router.post("", status_code=202, response_model=EnsembleAccepted, responses=_ERRORS,
+@router.post("", status_code=202, operation_id="ensembles-submit", response_model=EnsembleAccepted,
+             responses=problem_responses({422: INVALID, 503: UNAVAILABLE_BACKEND}),
              summary="Submit an ensemble (members from a list, a level set or a parameter sweep)")
 def submit_ensemble(body: EnsembleRequest, request: Request, response: Response) -> EnsembleAccepted:
     """Every member is validated before anything is queued; then the chunks go to the workers."""
@@ -48,13 +56,15 @@ def submit_ensemble(body: EnsembleRequest, request: Request, response: Response)
                             chunks=len(chunks))
 
 
-@router.get("/{ensemble_id}", response_model=EnsembleView, responses=_ERRORS,
+@router.get("/{ensemble_id}", operation_id="ensembles-get", response_model=EnsembleView, responses=_ERRORS,
             summary="Status, progress (members done / total) and summary of an ensemble")
 def get_ensemble(ensemble_id: str, request: Request) -> JSONResponse:
     return JSONResponse(view(ensemble_id, _record(request, ensemble_id)))
 
 
-@router.get("/{ensemble_id}/members", responses=_ERRORS, summary="A page of member results")
+@router.get("/{ensemble_id}/members", operation_id="ensembles-members", response_model=MembersPage,
+            responses={**_ERRORS, **problem_responses({422: f"offset < 0, or limit outside 1 .. {MAX_PAGE}"})},
+            summary="A page of member results")
 def get_members(ensemble_id: str, request: Request, offset: int = Query(0, ge=0),
                 limit: int = Query(100, ge=1, le=MAX_PAGE)) -> JSONResponse:
     """Members ``offset .. offset + limit - 1`` that are done, each with its index, label, status and
@@ -65,8 +75,11 @@ def get_members(ensemble_id: str, request: Request, offset: int = Query(0, ge=0)
     return JSONResponse({"offset": offset, "limit": limit, "total": total, "members": page})
 
 
-@router.get("/{ensemble_id}/poincare", responses={**_ERRORS, 409: {"model": Problem,
-                                                                  "description": "no section asked for"}},
+@router.get("/{ensemble_id}/poincare", operation_id="ensembles-section", response_class=Response,
+            responses={**media_responses(("text/csv", "application/octet-stream"),
+                                         "every member's crossings: CSV (format=csv) or NPZ (format=npz)"),
+                       **_ERRORS, **problem_responses({409: "the ensemble asked for no section",
+                                                       422: "unknown format"})},
             summary="Every member's Poincare crossings, with the member index (CSV or NPZ)")
 def get_section(ensemble_id: str, request: Request,
                 format: Literal["csv", "npz"] = Query("csv")) -> Response:  # noqa: A002
@@ -81,8 +94,8 @@ def get_section(ensemble_id: str, request: Request,
     return Response(section_npz(store, ensemble_id, record), media_type="application/octet-stream", headers=headers)
 
 
-@router.delete("/{ensemble_id}", status_code=202, response_model=EnsembleView,
-               responses={**_ERRORS, 409: {"model": Problem, "description": "the ensemble already finished"}},
+@router.delete("/{ensemble_id}", status_code=202, operation_id="ensembles-cancel", response_model=EnsembleView,
+               responses={**_ERRORS, **problem_responses({409: "the ensemble already finished"})},
                summary="Cancel every chunk of an ensemble")
 def cancel_ensemble(ensemble_id: str, request: Request) -> JSONResponse:
     record = _record(request, ensemble_id)

@@ -7,17 +7,27 @@ from typing import Any, Literal
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
 
+from schemas.job_list import DEFAULT_LIMIT, MAX_LIMIT, STATUSES, JobList, JobListItem, job_kind
 from schemas.jobs import JobAccepted, JobRequest, JobView
-from schemas.problems import CONFLICT, NOT_FOUND, FieldError, Problem
+from schemas.problems import CONFLICT, NOT_FOUND, FieldError
+from schemas.results import TrajectoryExport
 from service.backends import JobBackend, JobRecord
-from service.errors import ProblemError, invalid_request
+from service.backends.base import InvalidCursor
+from service.errors import (
+    INVALID,
+    UNAVAILABLE_BACKEND,
+    ProblemError,
+    invalid_request,
+    media_responses,
+    problem_responses,
+)
 from service.exports import trajectory_csv, trajectory_npz
+from service.openapi import operation_id
 
-router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
-_ERRORS: dict[int | str, dict[str, Any]] = {
-    404: {"model": Problem, "description": "unknown job id"},
-    422: {"model": Problem, "description": "invalid request; `errors` names each field"},
-}
+#: Operation ids are explicit, ``jobs-<verb>``; a route without one gets ``jobs-<its name>``.
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"], generate_unique_id_function=operation_id)
+#: The problems of a route that reads one job.
+_ERRORS: dict[int | str, dict[str, Any]] = problem_responses({404: "unknown job id", 503: UNAVAILABLE_BACKEND})
 
 
 def _backend(request: Request) -> JobBackend:
@@ -35,8 +45,8 @@ def _found(record: JobRecord | None, job_id: str) -> JobRecord:
     return record
 
 
-@router.post("", status_code=202, response_model=JobAccepted, responses=_ERRORS,
-             summary="Submit a simulation job")
+@router.post("", status_code=202, operation_id="jobs-submit", response_model=JobAccepted,
+             responses=problem_responses({422: INVALID, 503: UNAVAILABLE_BACKEND}), summary="Submit a simulation job")
 def submit_job(job: JobRequest, request: Request, response: Response) -> JobAccepted:
     """Validate (shape, ranges, |γ| = 1, state names) and queue; nothing is queued if invalid."""
     problems = job.problems()
@@ -48,13 +58,18 @@ def submit_job(job: JobRequest, request: Request, response: Response) -> JobAcce
     return JobAccepted(id=record.id, status="queued", location=location)
 
 
-@router.get("/{job_id}", response_model=JobView, responses=_ERRORS, summary="Status, progress and result of a job")
+@router.get("/{job_id}", operation_id="jobs-get", response_model=JobView, responses=_ERRORS,
+            summary="Status, progress and result of a job")
 def get_job(job_id: str, request: Request) -> JSONResponse:
     return JSONResponse(_view(_found(_backend(request).get(job_id), job_id)))
 
 
-@router.get("/{job_id}/trajectory", responses={**_ERRORS, 409: {"model": Problem, "description": "the job has not "
-                                                                                              "succeeded (yet)"}},
+@router.get("/{job_id}/trajectory", operation_id="jobs-trajectory", response_model=TrajectoryExport,
+            responses={**media_responses(("text/csv", "application/octet-stream"),
+                                         "the samples: JSON (format=json), CSV (format=csv) or NPZ (format=npz)"),
+                       **problem_responses({404: "unknown job id", 409: "the job has not succeeded (yet), or is a "
+                                                                        "paper report",
+                                            422: "unknown format", 503: UNAVAILABLE_BACKEND})},
             summary="The sampled trajectory as JSON, CSV (a header with units; t and tau first) or NPZ")
 def get_trajectory(job_id: str, request: Request,
                    format: Literal["json", "csv", "npz"] = Query("json")) -> Response:  # noqa: A002
@@ -73,9 +88,9 @@ def get_trajectory(job_id: str, request: Request,
     return JSONResponse({"units": record.result["system"]["units"], **record.result["trajectory"]})
 
 
-@router.delete("/{job_id}", response_model=JobView,
-               responses={**_ERRORS, 409: {"model": Problem, "description": "the job already finished"}},
-               summary="Cancel a job")
+@router.delete("/{job_id}", status_code=202, operation_id="jobs-cancel", response_model=JobView,
+               responses={**_ERRORS, **problem_responses({409: "the job already finished"})},
+               summary="Cancel a job (202 with the job's view)")
 def cancel_job(job_id: str, request: Request) -> JSONResponse:
     """A queued job never starts; a running one stops at its next progress report (≤ 0.2 s)."""
     backend = _backend(request)
@@ -83,3 +98,26 @@ def cancel_job(job_id: str, request: Request) -> JSONResponse:
     if before.status in ("succeeded", "failed"):
         raise ProblemError(409, "Job already finished", f"job {job_id} already {before.status}", CONFLICT)
     return JSONResponse(_view(_found(backend.cancel(job_id), job_id)), status_code=202)
+
+
+@router.get("", operation_id="jobs-list", response_model=JobList,
+            responses=problem_responses({422: "invalid `status`, `limit` or `cursor`; `errors` names the field",
+                                         503: UNAVAILABLE_BACKEND}),
+            summary="List jobs, newest first (no results; page with next_cursor)")
+def list_jobs(request: Request,
+              status: str | None = Query(None, description=f"only jobs with this status: {', '.join(STATUSES)}",
+                                         json_schema_extra={"enum": list(STATUSES)}),
+              limit: int = Query(DEFAULT_LIMIT, ge=1, le=MAX_LIMIT, description="most items on the page"),
+              cursor: str | None = Query(None, description="a previous page's next_cursor, as it is")) -> JobList:
+    """Every job this service knows (posted, or sent straight to the queue by a job-queue client),
+    newest first: id, status, progress, created_at, kind, location."""
+    if status is not None and status not in STATUSES:
+        raise invalid_request([FieldError(field="status", reason=f"{status!r} is not a job status; one of "
+                                                                 f"{', '.join(STATUSES)}")])
+    try:
+        records, next_cursor = _backend(request).list_jobs(status, limit, cursor)
+    except InvalidCursor as exc:
+        raise invalid_request([FieldError(field="cursor", reason=str(exc))]) from None
+    return JobList(items=[JobListItem(id=r.id, status=r.status, progress=r.progress, created_at=r.created_at,  # type: ignore[arg-type]
+                                      kind=job_kind(r.request), location=f"/v1/jobs/{r.id}") for r in records],
+                   next_cursor=next_cursor)

@@ -2,25 +2,33 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterator
 from typing import Any
 
 from fastapi import APIRouter
 
 from nonholonomic.isomorphisms import MAPS, SOURCE_KINDS, MapInputError, describe, get_map, map_states
-from schemas.maps import MapRequest
+from schemas.maps import MapList, MapRequest, MapResult
 from schemas.problems import NOT_FOUND, FieldError
-from service.errors import ProblemError, invalid_request
+from service.errors import ProblemError, invalid_request, problem_responses
+from service.openapi import operation_id
 
-router = APIRouter(prefix="/v1/maps", tags=["maps"])
+router = APIRouter(prefix="/v1/maps", tags=["maps"], generate_unique_id_function=operation_id)
 
 
-@router.get("", summary="The isomorphisms: source, target, time substitution, level set, corrections")
+@router.get("", operation_id="maps-list", response_model=MapList, response_model_exclude_unset=True,
+            summary="The isomorphisms: source, target, time substitution, level set, corrections")
 def list_maps() -> dict[str, Any]:
     return {"maps": [describe(get_map(name, (MAPS[name][1] or ("zero",))[0])) | {
         "source_potentials": list(MAPS[name][1]) if MAPS[name][1] else "all of the source's"} for name in MAPS]}
 
 
-@router.post("/{name}", summary="Map states through an isomorphism (synchronous)")
+@router.post("/{name}", operation_id="maps-apply", response_model=MapResult, response_model_exclude_unset=True,
+             responses=problem_responses({404: "unknown map name",
+                                          422: "invalid request, a source kind or potential the map does not take, "
+                                               "or a state off the map's level set; `errors` names each field"}),
+             summary="Map states through an isomorphism (synchronous)")
 def apply_map(name: str, request: MapRequest) -> dict[str, Any]:
     if name not in MAPS:
         raise ProblemError(404, "Unknown map", f"no map {name!r}; known: {', '.join(MAPS)}", NOT_FOUND)
@@ -33,7 +41,25 @@ def apply_map(name: str, request: MapRequest) -> dict[str, Any]:
     except KeyError as exc:
         raise invalid_request([FieldError(field="system.potential.kind", reason=str(exc.args[0]))]) from None
     try:
-        return map_states(m, request.system.parameter_values(), request.states,
-                          inverse=request.inverse, project=request.project)
+        out = map_states(m, request.system.parameter_values(), request.states,
+                         inverse=request.inverse, project=request.project)
     except MapInputError as exc:
         raise invalid_request([FieldError(field=f, reason=r) for f, r in exc.problems]) from None
+    infinite = list(_non_finite(out))
+    if infinite:  # e.g. Theorem 3 with D = 0: alpha = -beta = det J / D
+        raise invalid_request([FieldError(field="system", reason=(
+            f"{name} gives non-finite values for these parameters ({', '.join(infinite[:6])}): the map is "
+            "singular there (e.g. alpha = det J / D at D = 0) or its evaluation overflows"))])
+    return out
+
+
+def _non_finite(value: Any, path: str = "") -> Iterator[str]:
+    """Paths of the non-finite numbers in a map's answer (JSON has none)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        yield path
+    elif isinstance(value, dict):
+        for key, item in value.items():
+            yield from _non_finite(item, f"{path}.{key}" if path else str(key))
+    elif isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            yield from _non_finite(item, f"{path}[{i}]")

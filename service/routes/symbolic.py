@@ -14,10 +14,20 @@ import sympy as sp
 from fastapi import APIRouter
 
 from schemas.problems import TIMEOUT, FieldError
-from schemas.symbolic import BracketVerifyRequest, HamiltonizeRequest
-from service.errors import ProblemError, invalid_request
+from schemas.symbolic import (
+    BracketVerifyRequest,
+    BracketVerifyResult,
+    HamiltonizeExamples,
+    HamiltonizeRequest,
+    HamiltonizeResult,
+)
+from service.errors import INVALID, ProblemError, invalid_request, problem_responses
+from service.openapi import operation_id
 
-router = APIRouter(tags=["symbolic"])
+router = APIRouter(tags=["symbolic"], generate_unique_id_function=operation_id)
+#: The problems of the two symbolic routes.
+_ERRORS = problem_responses({408: "the symbolic work is still running at budget_s + 30 s; it was stopped",
+                             422: INVALID + " (parse errors name the field and position)"})
 
 
 def _declare(names: Sequence[str], field: str) -> dict[str, sp.Symbol]:
@@ -38,7 +48,9 @@ def _parse(text: str, symbols: dict[str, sp.Symbol], field: str) -> sp.Expr:
         raise invalid_request([FieldError(field=field, reason=str(exc))]) from None
 
 
-@router.post("/v1/brackets/verify", summary="Jacobi identity, Casimirs and rank of a user-given bracket")
+@router.post("/v1/brackets/verify", operation_id="symbolic-brackets-verify", response_model=BracketVerifyResult,
+             response_model_exclude_unset=True, responses=_ERRORS,
+             summary="Jacobi identity, Casimirs and rank of a user-given bracket")
 def verify_bracket(request: BracketVerifyRequest) -> dict[str, Any]:
     from nonholonomic.evidence.brackets import verify_user_bracket
 
@@ -73,7 +85,9 @@ def _hamiltonize_json(args: tuple[Any, ...], kwargs: dict[str, Any]) -> dict[str
     return reduce(*args, **kwargs).to_json()
 
 
-@router.post("/v1/hamiltonize", summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
+@router.post("/v1/hamiltonize", operation_id="symbolic-hamiltonize", response_model=HamiltonizeResult,
+             response_model_exclude_unset=True, responses=_ERRORS,
+             summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
 def hamiltonize(request: HamiltonizeRequest) -> dict[str, Any]:
     names = request.coordinates + request.velocities + list(request.parameters) + request.symbols
     symbols = _declare(names, "coordinates")
@@ -132,7 +146,9 @@ def _free_names(*texts: str) -> list[str]:
     return sorted(found - set(ALLOWED_FUNCTIONS))
 
 
-@router.get("/v1/hamiltonize/examples", summary="Worked examples: Veselova and Chaplygin's ball in Euler angles")
+@router.get("/v1/hamiltonize/examples", operation_id="symbolic-hamiltonize-examples",
+            response_model=HamiltonizeExamples, response_model_exclude_unset=True,
+            summary="Worked examples: Veselova and Chaplygin's ball in Euler angles")
 def hamiltonize_examples() -> dict[str, Any]:
     from nonholonomic.local_forms import (
         BALL_MONOPOLE_CHART,

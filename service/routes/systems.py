@@ -8,18 +8,22 @@ from fastapi import APIRouter
 
 from nonholonomic.catalog import catalog, describe
 from nonholonomic.systems import SYSTEMS
+from schemas.catalog import Catalog, SystemDescription
 from schemas.problems import NOT_FOUND
-from service.errors import ProblemError
+from service.errors import ProblemError, problem_responses
+from service.openapi import operation_id
 
-router = APIRouter(prefix="/v1/systems", tags=["systems"])
+router = APIRouter(prefix="/v1/systems", tags=["systems"], generate_unique_id_function=operation_id)
 
 
-@router.get("", summary="The catalog: kinds, parameters, state, potentials, integrals, checks")
+@router.get("", operation_id="systems-list", response_model=Catalog, response_model_exclude_unset=True,
+            summary="The catalog: kinds, parameters, state, potentials, integrals, checks")
 def list_systems() -> dict[str, Any]:
     return catalog()
 
 
-@router.get("/{kind}", summary="One kind of the catalog")
+@router.get("/{kind}", operation_id="systems-get", response_model=SystemDescription, response_model_exclude_unset=True,
+            responses=problem_responses({404: "unknown system kind"}), summary="One kind of the catalog")
 def get_system(kind: str) -> dict[str, Any]:
     if kind not in SYSTEMS:
         raise ProblemError(404, "Unknown system kind", f"no system kind {kind!r}; known: {sorted(SYSTEMS)}", NOT_FOUND)

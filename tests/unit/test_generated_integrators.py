@@ -271,3 +271,27 @@ def test_integral_evidence_batch_is_the_evidence_member_by_member():
             assert abs(one.final - other.final) <= 1e-15 * max(1.0, abs(one.final))
             assert abs(one.max_rel_drift - other.max_rel_drift) < 1e-15
             assert one.reference == pytest.approx(other.reference, rel=1e-15)
+
+
+@pytest.mark.parametrize("kind,potential", KINDS)
+def test_compiled_integrals_are_the_sympy_integrals(kind, potential):
+    """Every kind's integrals and scales compile (|k|, |c|, |beta| in the scales included: heyoka has
+    no Abs, sqrt(x**2) stands for it) and agree with the numpy kernels of the same expressions, also
+    at negative parameters where |x| and x differ."""
+    from nonholonomic.evidence.integrals import compiled_integrals
+
+    system = get_system(kind, potential)
+    cf, ts = compiled_integrals(system)
+    rng = np.random.default_rng(5)
+    n = 32
+    X = 0.3 * rng.normal(size=(n, ts.n_state))
+    P = rng.uniform(-2.0, 2.0, size=(n, len(system.parameter_symbols)))
+    exprs = [c.expression for c in system.integrals] + [c.scale for c in system.integrals]
+    fn = sp.lambdify([*system.state_symbols, *system.parameter_symbols], exprs, modules="numpy")
+    with np.errstate(all="ignore"):
+        ref = np.stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in fn(*X.T, *P.T)])
+        got = cf(np.ascontiguousarray(X.T), pars=np.ascontiguousarray(ts.runtime_parameters(P.T)[:cf.nparams]))
+    finite = np.isfinite(ref)
+    assert finite.mean() > 0.5
+    scale = np.abs(ref) + 1e-3 * np.max(np.abs(ref[finite]))
+    assert np.max(np.abs(got - ref)[finite] / scale[finite]) < 1e-12

@@ -1,0 +1,151 @@
+"""The ``nonholonomic`` command line.
+
+Commands: ``systems``, ``run``, ``ensemble``, ``report`` (clients of the API at ``--url``) and
+``serve``, ``worker`` (start the API or a Celery worker).
+
+Exit codes: 0 success; 1 the job or ensemble failed or was cancelled; 2 a usage error or a request
+the service refused (4xx; each offending field is printed); 3 the service cannot be reached (or
+answered 5xx); 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+
+from client import commands
+from client.api import default_url
+from client.errors import ApiError, JobFailed
+from client.processes import execute, serve_command, worker_command
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_UNREACHABLE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+
+def _serve(args: argparse.Namespace) -> int:
+    execute(*serve_command(args.host, args.port, args.queue, os.environ))
+
+
+def _worker(args: argparse.Namespace) -> int:
+    execute(*worker_command(args.concurrency, os.environ))
+
+
+def _positive(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, not {value}")
+    return value
+
+
+def _port(text: str) -> int:
+    value = int(text)
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"not a port: {value}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``nonholonomic``.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
+    parser = argparse.ArgumentParser(
+        prog="nonholonomic", description="Client and launcher of the nonholonomic computation service.",
+        epilog="exit codes: 0 ok, 1 job failed or cancelled, 2 usage or invalid request, 3 service unreachable")
+    parser.add_argument("--url", default=default_url(),
+                        help="the API's address (default $NONHOLONOMIC_URL, else http://127.0.0.1:8000; "
+                             "now %(default)s)")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("systems", help="list the systems of the catalog")
+    p.add_argument("--json", action="store_true", help="print the raw catalog")
+    p.set_defaults(func=commands.systems)
+
+    p = sub.add_parser("run", help="submit a simulation job (SPEC: a JSON request; - reads stdin)")
+    p.add_argument("spec", metavar="SPEC")
+    p.add_argument("--wait", action="store_true", help="wait with a progress bar, then print a summary")
+    p.add_argument("--out", metavar="FILE", help="write the trajectory (.csv, .npz or .json; implies --wait)")
+    p.add_argument("--result", metavar="FILE", help="write the result as JSON (implies --wait)")
+    p.set_defaults(func=commands.run)
+
+    p = sub.add_parser("ensemble", help="submit an ensemble (SPEC: a JSON request; - reads stdin)")
+    p.add_argument("spec", metavar="SPEC")
+    p.add_argument("--wait", action="store_true", help="wait with a progress bar, then print a summary")
+    p.add_argument("--out", metavar="FILE", help="write the Poincare section (.csv or .npz; implies --wait)")
+    p.set_defaults(func=commands.ensemble)
+
+    p = sub.add_parser("report", help="run the paper report and save its HTML page")
+    p.add_argument("--claims", metavar="IDS", help="comma-separated claim ids (GET /v1/paper/claims); default all")
+    p.add_argument("--out", metavar="FILE", required=True, help="where to write the HTML page")
+    p.set_defaults(func=commands.report)
+
+    p = sub.add_parser("serve", help="run the API (embedded mode unless --queue)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default %(default)s)")
+    p.add_argument("--port", type=_port, default=8000, help="port (default %(default)s; 0 picks a free one)")
+    p.add_argument("--queue", action="store_true",
+                   help="queue mode: send jobs to Celery workers through $REDIS_URL (default redis://127.0.0.1:6379/0)")
+    p.set_defaults(func=_serve)
+
+    p = sub.add_parser("worker", help="run a Celery worker on $NONHOLONOMIC_QUEUE through $REDIS_URL")
+    p.add_argument("--concurrency", type=_positive, help="worker processes (default: one per core)")
+    p.set_defaults(func=_worker)
+    return parser
+
+
+def _say(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _report(exc: ApiError) -> None:
+    _say(f"error: {exc.title}: {exc.detail}" if exc.detail else f"error: {exc.title}")
+    for e in exc.errors:
+        _say(f"  {e['field']}: {e['reason']}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``nonholonomic`` with ``argv`` (default ``sys.argv[1:]``).
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+
+    Returns
+    -------
+    int
+        The exit code (see the module's docstring); errors are printed on stderr, never as a
+        traceback.
+    """
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a usage error (2)
+        return exc.code if isinstance(exc.code, int) else EXIT_USAGE
+    try:
+        return int(args.func(args))
+    except JobFailed as exc:
+        _report(exc)
+        return EXIT_FAILED
+    except ApiError as exc:
+        _report(exc)
+        if exc.unreachable or (exc.status or 0) >= 500:
+            return EXIT_UNREACHABLE
+        return EXIT_USAGE
+    except commands.UsageError as exc:
+        _say(f"error: {exc}")
+        return EXIT_USAGE
+    except commands.Interrupted as exc:
+        _say(str(exc))
+        return EXIT_INTERRUPTED
+    except KeyboardInterrupt:
+        _say("interrupted")
+        return EXIT_INTERRUPTED
+    except OSError as exc:  # writing an output file
+        _say(f"error: {exc}")
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

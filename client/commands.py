@@ -1,0 +1,163 @@
+"""The client-side commands of ``nonholonomic``: ``systems``, ``run``, ``ensemble``, ``report``.
+
+Each takes the parsed arguments and returns an exit code; errors are raised (:class:`UsageError`,
+:class:`client.ApiError`) and turned into messages and exit codes by :func:`client.cli.main`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from client.api import Client, Progress
+from client.progress import ProgressBar
+from client.summaries import ensemble_summary, job_summary, report_summary, systems_table
+
+
+class UsageError(Exception):
+    """A mistake in the command line or its input files (exit code 2)."""
+
+
+class Interrupted(Exception):
+    """Ctrl-C while waiting; the job keeps running on the service (exit code 130)."""
+
+
+def read_spec(source: str) -> Any:
+    """Read a JSON request from a file, or from stdin for ``-``.
+
+    Parameters
+    ----------
+    source : str
+        A path or ``-``.
+
+    Returns
+    -------
+    Any
+        The parsed JSON.
+
+    Raises
+    ------
+    UsageError
+        If the file cannot be read or is not JSON (with the line, column and character position).
+    """
+    name = "stdin" if source == "-" else source
+    try:
+        text = sys.stdin.read() if source == "-" else Path(source).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UsageError(f"cannot read {name}: {exc}") from exc
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise UsageError(f"{name} is not JSON: {exc.msg} at line {exc.lineno} column {exc.colno} "
+                         f"(character {exc.pos})") from exc
+
+
+def out_format(out: str | None, allowed: Sequence[str]) -> str | None:
+    """The export format named by an output file's suffix.
+
+    Parameters
+    ----------
+    out : str, optional
+        The ``--out`` path.
+    allowed : sequence of str
+        Formats this command can write.
+
+    Returns
+    -------
+    str or None
+        The suffix without its dot; None without ``out``.
+
+    Raises
+    ------
+    UsageError
+        For any other suffix.
+    """
+    if out is None:
+        return None
+    suffix = Path(out).suffix.lower().lstrip(".")
+    if suffix not in allowed:
+        raise UsageError(f"--out {out}: the suffix must be one of {', '.join('.' + a for a in allowed)}")
+    return suffix
+
+
+def _client(args: argparse.Namespace) -> Client:
+    return Client(args.url)
+
+
+def _wait(waiter: Callable[..., dict[str, Any]], ident: str, label: str) -> dict[str, Any]:
+    bar: Progress
+    with ProgressBar(sys.stderr, label=label) as bar:
+        try:
+            return waiter(ident, progress=bar)
+        except KeyboardInterrupt:
+            raise Interrupted(f"interrupted; {label} keeps running on the service") from None
+
+
+def systems(args: argparse.Namespace) -> int:
+    """``nonholonomic systems [--json]``: the catalog as a table, or raw."""
+    with _client(args) as api:
+        catalog = api.systems()
+    print(json.dumps(catalog, indent=2, ensure_ascii=False) if args.json else systems_table(catalog))
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    """``nonholonomic run SPEC [--wait] [--out FILE] [--result FILE]``: submit a job, maybe wait for it."""
+    fmt = out_format(args.out, ("csv", "npz", "json"))
+    spec = read_spec(args.spec)
+    with _client(args) as api:
+        job_id = api.submit(spec)
+        print(f"job {job_id}\nlocation {api.url(f'/v1/jobs/{job_id}')}", flush=True)
+        if not (args.wait or args.out or args.result):
+            return 0
+        view = _wait(api.wait, job_id, f"job {job_id}")
+        print(job_summary(view))
+        if args.result:
+            Path(args.result).write_text(json.dumps(view["result"], indent=1) + "\n", encoding="utf-8")
+            print(f"result written to {args.result}")
+        if args.out:
+            path = api.trajectory(job_id, fmt, out=args.out)  # type: ignore[arg-type]
+            print(f"trajectory written to {path}")
+    return 0
+
+
+def ensemble(args: argparse.Namespace) -> int:
+    """``nonholonomic ensemble SPEC [--wait] [--out section.csv|.npz]``: submit an ensemble, maybe wait.
+
+    Exit code 1 when every member failed (an ensemble whose members fail alone still succeeds).
+    """
+    fmt = out_format(args.out, ("csv", "npz"))
+    spec = read_spec(args.spec)
+    if fmt and isinstance(spec, dict) and not spec.get("poincare"):
+        raise UsageError("--out writes the Poincare section: the spec asks for none (add \"poincare\")")
+    with _client(args) as api:
+        ensemble_id = api.submit_ensemble(spec)
+        print(f"ensemble {ensemble_id}\nlocation {api.url(f'/v1/ensembles/{ensemble_id}')}", flush=True)
+        if not (args.wait or args.out):
+            return 0
+        view = _wait(api.wait_ensemble, ensemble_id, f"ensemble {ensemble_id}")
+        print(ensemble_summary(view))
+        if args.out:
+            path = api.section(ensemble_id, fmt, out=args.out)  # type: ignore[arg-type]
+            print(f"section written to {path}")
+    summary = view.get("summary") or {}
+    return 1 if summary.get("members") and not summary.get("succeeded") else 0
+
+
+def report(args: argparse.Namespace) -> int:
+    """``nonholonomic report [--claims a,b] --out report.html``: run the paper report, save its page."""
+    claims = [c.strip() for c in args.claims.split(",") if c.strip()] if args.claims else None
+    if args.claims is not None and not claims:
+        raise UsageError("--claims names no claim")
+    with _client(args) as api:
+        job_id = api.paper_report(claims)
+        print(f"job {job_id}\nlocation {api.url(f'/v1/paper/report/{job_id}')}", flush=True)
+        view = _wait(api.wait, job_id, f"paper report {job_id}")
+        Path(args.out).write_text(api.report_page(job_id), encoding="utf-8")
+    print(report_summary(view))
+    print(f"page written to {args.out}")
+    return 0

@@ -1,0 +1,105 @@
+"""A text progress bar for waiting on jobs: redrawn in place on a terminal, one line per 10 % otherwise."""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable
+from typing import Self, TextIO
+
+#: Width of the bar in characters (without the brackets).
+WIDTH = 30
+
+
+def render_bar(fraction: float, status: str, elapsed: float | None = None, width: int = WIDTH) -> str:
+    """The bar for one progress report.
+
+    Parameters
+    ----------
+    fraction : float
+        Progress in [0, 1] (clipped; NaN counts as 0).
+    status : str
+        The job's status (``queued``, ``running``, ...).
+    elapsed : float, optional
+        Seconds since the wait began, shown when given.
+    width : int, default 30
+        Characters inside the brackets.
+
+    Returns
+    -------
+    str
+        E.g. ``"[###############---------------]  50% running 1.2 s"``.
+    """
+    f = 0.0 if not math.isfinite(fraction) else min(max(fraction, 0.0), 1.0)
+    filled = round(f * width)
+    text = f"[{'#' * filled}{'-' * (width - filled)}] {100 * f:3.0f}% {status}"
+    return text if elapsed is None else f"{text} {elapsed:.1f} s"
+
+
+class ProgressBar:
+    """A callable ``progress(fraction, status)`` for :meth:`client.Client.wait` that draws a bar.
+
+    On a terminal the bar is redrawn in place with ``\\r``; on anything else (a log file, a pipe)
+    it writes one line each time the progress reaches a new tenth or the status changes.
+
+    Parameters
+    ----------
+    stream : file-like, optional
+        Where to draw (default ``sys.stderr``).
+    label : str, optional
+        Written before the bar (e.g. the job id).
+    tty : bool, optional
+        Force terminal (``True``) or line (``False``) mode; default ``stream.isatty()``.
+    clock : callable, optional
+        Returns seconds (default ``time.monotonic``); for tests.
+    """
+
+    def __init__(self, stream: TextIO | None = None, label: str = "", tty: bool | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.label = f"{label} " if label else ""
+        self.tty = bool(self.stream.isatty()) if tty is None else tty
+        self._clock = clock
+        self._start = clock()
+        self._last: tuple[int, str] | None = None
+        self._width = 0
+        self._open = False
+
+    def __call__(self, fraction: float, status: str) -> None:
+        """Draw one progress report.
+
+        Parameters
+        ----------
+        fraction : float
+            Progress in [0, 1].
+        status : str
+            The job's status.
+        """
+        line = self.label + render_bar(fraction, status, self._clock() - self._start)
+        if self.tty:
+            pad = " " * max(0, self._width - len(line))
+            self.stream.write(f"\r{line}{pad}")
+            self._width = len(line)
+            self._open = True
+        else:
+            tenth = math.floor(10 * min(max(fraction, 0.0), 1.0) + 1e-9) if math.isfinite(fraction) else 0
+            key = (tenth, status)
+            if key == self._last:
+                return
+            self._last = key
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        """End the bar's line on a terminal, so later output starts on a fresh line."""
+        if self.tty and self._open:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._open = False
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,117 @@
+"""Response models of the catalog (``GET /v1/systems``, ``GET /v1/systems/{kind}``).
+
+They describe what :func:`nonholonomic.catalog.describe` returns; ``extra="forbid"`` so that a key
+the core adds without a field here fails the API tests (response validation) instead of going
+undocumented.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class CatalogParameter(_Strict):
+    """A parameter group as a request spells it (``inertia``, ``D``, ``a`` ...)."""
+
+    name: str = Field(description="request name of the group")
+    shape: Literal["scalar", "vector", "symmetric_matrix"]
+    components: list[str] = Field(description="the symbols, in order (a symmetric matrix: entries 11, 12, 13, 22, 23, 33)")
+    meaning: str
+    unit: str
+    admissible: str = Field(description="admissible range, e.g. '> 0'")
+    components_are: str | None = Field(None, description="present when the equations use a transform of the "
+                                                          "requested matrix (the quadric's B^-1)")
+
+
+class CatalogPotential(_Strict):
+    """A potential the kind supports, with what an ensemble's ``sample.level`` may fix for it."""
+
+    kind: str
+    formula: str
+    parameters: list[CatalogParameter]
+    levels: list[str] = Field(description="integrals a {'sample': {'level': {...}}} of an ensemble may fix")
+    sampling: str = Field(description="how states on a level set are drawn")
+
+
+class CatalogStateVector(_Strict):
+    name: str
+    components: list[str]
+    meaning: str
+    unit: str
+
+
+class CatalogAlternativeInput(_Strict):
+    """A vector an initial state may give instead of a state vector (the ball's ``omega`` for ``M``)."""
+
+    name: str
+    replaces: str
+    formula: str
+
+
+class CatalogDerivedVector(_Strict):
+    """A vector computed from the state and reported along the trajectory."""
+
+    name: str
+    formula: str
+    meaning: str
+    unit: str
+
+
+class CatalogConstraint(_Strict):
+    field: str = Field(description="the state vector it constrains")
+    formula: str
+    equation: str
+    tolerance: float = Field(description="largest violation accepted in an initial state")
+    projection: str | None = Field(description="how project_initial_state moves a state onto it (null: no projection)")
+
+
+class CatalogIntegral(_Strict):
+    name: str
+    formula: str
+    equation: str
+    claimed_for_potentials: list[str]
+
+
+class CatalogMeasure(_Strict):
+    formula: str
+    equation: str
+
+
+class CatalogReducedTime(_Strict):
+    formula: str
+    equation: str
+    unit: str
+
+
+class SystemDescription(_Strict):
+    """One kind of the catalog: everything a client needs to pose a job for it."""
+
+    kind: str
+    title: str
+    equation: str = Field(description="paper equation label")
+    parameters: list[CatalogParameter]
+    potentials: list[CatalogPotential]
+    state: list[CatalogStateVector]
+    alternative_inputs: list[CatalogAlternativeInput]
+    derived: list[CatalogDerivedVector]
+    constraints: list[CatalogConstraint]
+    integrals: list[CatalogIntegral]
+    measure: CatalogMeasure
+    reduced_time: CatalogReducedTime | None
+    notes: list[str]
+    checks: list[str] = Field(description="the evidence a job of this kind may ask for")
+    maps: dict[str, list[str]] = Field(description="potential -> names of the maps (POST /v1/maps/{name}) from it")
+    example: dict[str, Any] | None = Field(description="a POST /v1/jobs body for this kind")
+    time_unit: str
+
+
+class Catalog(_Strict):
+    """``GET /v1/systems``: one entry per kind."""
+
+    systems: list[SystemDescription]

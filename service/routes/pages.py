@@ -1,0 +1,164 @@
+"""Pages and plots: ``/v1/jobs/{id}/page``, ``/v1/jobs/{id}/plots/{name}.{format}`` and the same for
+ensembles. Plots of finished jobs and ensembles are cached (they cannot change)."""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Iterator
+from typing import Any, Literal
+
+from fastapi import APIRouter, Request, Response
+from fastapi.responses import HTMLResponse
+
+from nonholonomic.systems import get_system
+from schemas.problems import CONFLICT, NOT_FOUND
+from schemas.report import REPORT_JOB
+from schemas.results import system_units
+from service.backends import JobBackend, JobRecord
+from service.ensembles import members_page, view
+from service.errors import ProblemError, media_responses, problem_responses
+from service.pages import render_ensemble, render_job, render_report, render_report_status
+from service.plots import FORMATS, PlotUnavailable, ensemble_plot, job_plot
+
+router = APIRouter()
+#: Members listed on an ensemble's page (the rest through ``/members``).
+PAGE_MEMBERS = 50
+#: Rendered plots kept in memory (finished jobs and ensembles only).
+PLOT_CACHE_SIZE = 64
+JobPlotName = Literal["trajectory", "integrals", "poincare", "lyapunov"]
+EnsemblePlotName = Literal["poincare", "exponents"]
+PlotFormat = Literal["png", "svg"]
+_HTML = media_responses(["text/html"], "the page")
+_IMAGE = media_responses(["image/png", "image/svg+xml"], "the plot (PNG or SVG, as the path's suffix says)")
+
+
+class _PlotCache:
+    """A small LRU of rendered plots, shared by the request threads."""
+
+    def __init__(self, size: int) -> None:
+        self.size, self.items, self.lock = size, OrderedDict[tuple[str, ...], bytes](), threading.Lock()
+
+    def get(self, key: tuple[str, ...], make: Callable[[], bytes], keep: bool) -> bytes:
+        with self.lock:
+            if key in self.items:
+                self.items.move_to_end(key)
+                return self.items[key]
+        data = make()
+        if keep:
+            with self.lock:
+                self.items[key] = data
+                while len(self.items) > self.size:
+                    self.items.popitem(last=False)
+        return data
+
+
+_cache = _PlotCache(PLOT_CACHE_SIZE)
+
+
+def _backend(request: Request) -> JobBackend:
+    return request.app.state.backend
+
+
+def _job(request: Request, job_id: str) -> JobRecord:
+    record = _backend(request).get(job_id)
+    if record is None:
+        raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
+    return record
+
+
+def _ensemble(request: Request, ensemble_id: str) -> dict[str, Any]:
+    record = _backend(request).ensembles.record(ensemble_id)
+    if record is None:
+        raise ProblemError(404, "Unknown ensemble", f"no ensemble with id {ensemble_id!r}", NOT_FOUND)
+    return record
+
+
+def _image(data: bytes, fmt: str, filename: str) -> Response:
+    return Response(data, media_type=FORMATS[fmt], headers={"Content-Disposition": f'inline; filename="{filename}"'})
+
+
+@router.get("/v1/jobs/{job_id}/page", tags=["jobs"], operation_id="jobs-page", response_class=HTMLResponse,
+            responses={**_HTML, **problem_responses({404: "unknown job id"})},
+            summary="The job as a page: system, evidence tables with verdicts, plots, links to the exports")
+def job_page(job_id: str, request: Request) -> HTMLResponse:
+    """Reloads itself every 2 s while the job is queued or running."""
+    record = _job(request, job_id)
+    if record.request.get("job") == REPORT_JOB:
+        return report_html(record)
+    return HTMLResponse(render_job({"id": record.id, "status": record.status, "progress": record.progress,
+                                    "created_at": record.created_at, "request": record.request,
+                                    "result": record.result, "error": record.error}))
+
+
+def report_html(record: JobRecord) -> HTMLResponse:
+    """The paper report's page (also ``GET /v1/paper/report/{id}``)."""
+    if record.status == "succeeded" and record.result is not None:
+        return HTMLResponse(render_report(record.result, record.id))
+    return HTMLResponse(render_report_status(record.id, record.status, record.progress, record.error,
+                                             record.created_at))
+
+
+@router.get("/v1/jobs/{job_id}/plots/{name}.{fmt}", tags=["jobs"], operation_id="jobs-plot",
+            response_class=Response,
+            responses={**_IMAGE, **problem_responses({404: "unknown job id",
+                                                      409: "the job has not succeeded, or asked for no such analysis",
+                                                      422: "unknown plot name or format"})},
+            summary="A plot of a job's result (matplotlib): trajectory, integrals, poincare or lyapunov, PNG or SVG")
+def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Request) -> Response:
+    record = _job(request, job_id)
+    if record.status != "succeeded" or record.result is None:
+        raise ProblemError(409, "No result yet", f"job {job_id} is {record.status}; its plots are there once it "
+                                                 "succeeded", CONFLICT)
+    if "trajectory" not in record.result:
+        raise ProblemError(409, "No plots", f"job {job_id} is a paper report, not a simulation", CONFLICT)
+    try:
+        data = _cache.get(("job", job_id, name, fmt), lambda: job_plot(name, record.result, record.request, fmt),
+                          keep=True)
+    except PlotUnavailable as exc:
+        raise ProblemError(409, "Plot unavailable", str(exc), CONFLICT) from None
+    return _image(data, fmt, f"job-{job_id}-{name}.{fmt}")
+
+
+def _units(request_json: dict[str, Any]) -> dict[str, str]:
+    system = request_json["system"]
+    return system_units(get_system(system["kind"], system["potential"]["kind"]))
+
+
+@router.get("/v1/ensembles/{ensemble_id}/page", tags=["ensembles"], operation_id="ensembles-page",
+            response_class=HTMLResponse, responses={**_HTML, **problem_responses({404: "unknown ensemble id"})},
+            summary="The ensemble as a page: progress, summary, plots, the first members, links to the exports")
+def ensemble_page(ensemble_id: str, request: Request) -> HTMLResponse:
+    """Reloads itself every 2 s while chunks are queued or running."""
+    record = _ensemble(request, ensemble_id)
+    members = members_page(_backend(request).ensembles, ensemble_id, record, 0, PAGE_MEMBERS)
+    return HTMLResponse(render_ensemble(view(ensemble_id, record), members, _units(record["request"])))
+
+
+def _all_members(request: Request, ensemble_id: str, record: dict[str, Any]) -> Iterator[dict[str, Any]]:
+    store = _backend(request).ensembles
+    for i in sorted(record["done"]):
+        yield from store.chunk_members(ensemble_id, i) or []
+
+
+@router.get("/v1/ensembles/{ensemble_id}/plots/{name}.{fmt}", tags=["ensembles"], operation_id="ensembles-plot",
+            response_class=Response,
+            responses={**_IMAGE, **problem_responses({404: "unknown ensemble id",
+                                                      409: "no member done yet, or no such analysis asked for",
+                                                      422: "unknown plot name or format"})},
+            summary="A plot of an ensemble (matplotlib): every member's poincare points, or the exponents")
+def ensemble_plot_route(ensemble_id: str, name: EnsemblePlotName, fmt: PlotFormat, request: Request) -> Response:
+    """Drawn from the members done so far; cached once the ensemble finished."""
+    record = _ensemble(request, ensemble_id)
+    current = view(ensemble_id, record)
+    if not record["done"]:
+        raise ProblemError(409, "No members yet", f"ensemble {ensemble_id} is {current['status']} and no chunk has "
+                                                  "finished yet", CONFLICT)
+    finished = current["status"] in ("succeeded", "failed", "cancelled")
+    try:
+        data = _cache.get(("ensemble", ensemble_id, name, fmt, str(len(record["done"]))),
+                          lambda: ensemble_plot(name, current, _all_members(request, ensemble_id, record), fmt),
+                          keep=finished)
+    except PlotUnavailable as exc:
+        raise ProblemError(409, "Plot unavailable", str(exc), CONFLICT) from None
+    return _image(data, fmt, f"ensemble-{ensemble_id}-{name}.{fmt}")

@@ -1,0 +1,148 @@
+"""Schemathesis over every operation of the app (embedded mode): no server error, and every answer
+conforms to the OpenAPI document (status code, content type, body schema).
+
+Bounded so that it runs in about a minute on two cores: small service limits (``t_final`` ≤ 100,
+200 samples, 16 ensemble members) keep validation cheap; jobs and ensembles the cases submit are
+accepted (202) but not run (the embedded backend's runners are stubbed: integrating fuzzed systems
+tests the integrators, not the API, and their kernel compilation cannot be interrupted); symbolic
+budgets are capped at 1 s; the symbolic routes and the paper report get fewer examples. Cases that name a job or an ensemble run twice: with the
+generated id (404) and with the id of a real finished one (a ball job with a section and
+exponents, an ensemble, a one-claim paper report), so the success answers are checked too.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+import schemathesis
+from fastapi.testclient import TestClient
+from hypothesis import HealthCheck, settings
+from schemathesis.checks import not_a_server_error
+from schemathesis.specs.openapi.checks import (
+    content_type_conformance,
+    response_schema_conformance,
+    status_code_conformance,
+)
+
+from nonholonomic.integration import IntegrationCancelled
+from schemas.settings import get_settings
+from service.backends import embedded
+from service.main import create_app
+
+CHECKS = [not_a_server_error, status_code_conformance, content_type_conformance, response_schema_conformance]
+LIMITS = {"NONHOLONOMIC_MAX_T_FINAL": "100", "NONHOLONOMIC_MAX_SAMPLES": "200",
+          "NONHOLONOMIC_MAX_SECTION_POINTS": "100", "NONHOLONOMIC_MAX_ENSEMBLE_MEMBERS": "16",
+          "NONHOLONOMIC_MAX_ENSEMBLE_VALUES": "400", "NONHOLONOMIC_MAX_ENSEMBLE_SECTION_POINTS": "1000"}
+#: Seconds granted to symbolic work in a fuzzed request (the schema allows up to 30).
+SYMBOLIC_BUDGET_S = 1.0
+#: Fewer examples for the expensive operations (per operation id; fuzzing phase).
+FEW = {"paper-report-submit": 4, "symbolic-hamiltonize": 10, "symbolic-brackets-verify": 10}
+MAX_EXAMPLES = 12
+
+BALL_JOB = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+            "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 21,
+            "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "gamma2"], "max_points": 20},
+            "lyapunov": {"count": 2, "interval": 1.0}}
+ENSEMBLE = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+            "members": {"sample": {"count": 4, "seed": 1, "level": {"energy": 1.0, "area": 0.0}}},
+            "t_final": 20.0, "samples": 2, "poincare": {"surface": "gamma3", "max_points": 20},
+            "lyapunov": {"count": 1}}
+
+
+def _config() -> schemathesis.Config:
+    return schemathesis.Config.from_dict({
+        "generation": {"max-examples": MAX_EXAMPLES, "deterministic": True},
+        "operations": [{"include-operation-id": op, "generation": {"max-examples": n}} for op, n in FEW.items()],
+    })
+
+
+class _WithoutLifespan:
+    """The app as schemathesis calls it: HTTP goes to the app, lifespan events are answered here.
+
+    Schemathesis' pytest plugin starts the app's lifespan on a test's first call and ends it after
+    every test: each operation would get a new backend, without the module's finished work.
+    """
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        if scope["type"] != "lifespan":
+            await self.app(scope, receive, send)
+            return
+        while True:
+            message = await receive()
+            if message["type"] == "lifespan.startup":
+                await send({"type": "lifespan.startup.complete"})
+            elif message["type"] == "lifespan.shutdown":
+                await send({"type": "lifespan.shutdown.complete"})
+                return
+
+
+def _not_run(*args: Any, **kwargs: Any) -> str:
+    """Stands for the job and chunk runners of the embedded backend during the fuzz."""
+    raise IntegrationCancelled("not run by the schemathesis test")
+
+
+def _wait(client: TestClient, location: str, timeout: float = 120.0) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        view = client.get(location).json()
+        if view["status"] in ("succeeded", "failed", "cancelled"):
+            return view
+        time.sleep(0.02)
+    raise TimeoutError(location)
+
+
+@pytest.fixture(scope="module")
+def api() -> Iterator[dict[str, Any]]:
+    """The app in embedded mode with small limits, its schema, and ids of finished work."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.delenv("REDIS_URL", raising=False)
+        mp.delenv("NONHOLONOMIC_REDIS_URL", raising=False)
+        mp.setenv("NONHOLONOMIC_WARM_UP", "false")
+        for name, value in LIMITS.items():
+            mp.setenv(name, value)
+        get_settings.cache_clear()
+        app = create_app()
+        setup = TestClient(app)
+        setup.__enter__()  # the lifespan: app.state.backend, for every test of the module
+        try:
+            locations = {"job": setup.post("/v1/jobs", json=BALL_JOB).headers["location"],
+                         "ensemble": setup.post("/v1/ensembles", json=ENSEMBLE).headers["location"],
+                         "report": setup.post("/v1/paper/report",
+                                              json={"claims": ["veselova.multiplier"]}).headers["location"]}
+            views = {name: _wait(setup, location) for name, location in locations.items()}
+            assert {name: v["status"] for name, v in views.items()} == dict.fromkeys(views, "succeeded"), views
+            # From here on, accepted jobs and ensemble chunks are not run: the fuzz checks the HTTP answers;
+            # running its jobs would only compile kernels (not interruptible) on the two cores.
+            mp.setattr(embedded, "run_job", _not_run)
+            mp.setattr(embedded, "run_ensemble_chunk", _not_run)
+            yield {"app": _WithoutLifespan(app), "job_id": views["job"]["id"], "ensemble_id": views["ensemble"]["id"],
+                   "report_id": views["report"]["id"]}
+        finally:
+            setup.__exit__(None, None, None)
+            get_settings.cache_clear()
+
+
+#: The document as the app serves it (read at collection; the app under test is the fixture's, same code).
+schema = schemathesis.openapi.from_dict(create_app().openapi(), config=_config())
+
+
+@schema.parametrize()
+@settings(deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+def test_every_operation_conforms(case, api):
+    if case.operation.path in ("/v1/brackets/verify", "/v1/hamiltonize") and isinstance(case.body, dict):
+        budget = case.body.get("budget_s")
+        if not isinstance(budget, (int, float)) or isinstance(budget, bool) or budget > SYMBOLIC_BUDGET_S:
+            case.body["budget_s"] = SYMBOLIC_BUDGET_S
+    case.call_and_validate(app=api["app"], checks=CHECKS)
+    real = {"job_id": api["report_id"] if case.operation.path.startswith("/v1/paper/") else api["job_id"],
+            "ensemble_id": api["ensemble_id"]}
+    names = set(case.path_parameters or {}) & set(real)
+    if names:  # again with a real, finished job or ensemble
+        case.path_parameters = {**case.path_parameters, **{n: real[n] for n in names}}
+        case.call_and_validate(app=api["app"], checks=CHECKS)

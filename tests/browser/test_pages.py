@@ -1,0 +1,170 @@
+"""The pages in a real headless Chromium (Debian's, driven by Playwright): the job page, the ensemble
+page, the paper report and /docs render their expected elements, every image and script loads from
+the service itself, and the browser logs no error. A screenshot of each goes to
+``$NONHOLONOMIC_TEST_OUTPUT/browser/`` (``test-output/`` under ``scripts/test.py``)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from urllib.parse import urlparse
+
+import httpx
+import pytest
+
+from tests.support import ROOT, free_port, poll_job, start_api, stop, wait_healthy
+
+pytestmark = pytest.mark.integration
+
+CHROMIUM = os.environ.get("NONHOLONOMIC_CHROMIUM", "/usr/bin/chromium")
+OUTPUT = Path(os.environ.get("NONHOLONOMIC_TEST_OUTPUT", ROOT / "test-output")) / "browser"
+BALL = {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7,
+        "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}}
+JOB = {"system": BALL, "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 300.0,
+       "samples": 301, "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "M3"]},
+       "lyapunov": {"interval": 1.0}}
+ENSEMBLE = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+            "members": {"sample": {"count": 8, "seed": 1, "level": {"energy": 1.0, "area": 0.0}}},
+            "t_final": 200.0, "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "gamma2"]},
+            "lyapunov": {"count": 1}}
+REPORT_CLAIMS = ["veselova.multiplier", "ball.measure", "ball.theorem_3"]
+
+
+@pytest.fixture(scope="module")
+def api(tmp_path_factory) -> Iterator[str]:
+    """The API under uvicorn in embedded mode."""
+    port = free_port()
+    log = tmp_path_factory.mktemp("browser") / "api.log"
+    proc = start_api(port, log, {"NONHOLONOMIC_WARM_UP": "false"})
+    base = f"http://127.0.0.1:{port}"
+    try:
+        wait_healthy(base, timeout=60)
+        yield base
+    finally:
+        stop(proc)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not Path(CHROMIUM).exists():
+        message = f"no Chromium at {CHROMIUM} (scripts/test.py installs Debian's chromium)"
+        if os.environ.get("NONHOLONOMIC_REQUIRE_BROWSER"):
+            pytest.fail(message)
+        pytest.skip(message)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        chromium = p.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                     args=["--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage"])
+        yield chromium
+        chromium.close()
+
+
+class Visit:
+    """One page load: console errors, failed requests and every host asked."""
+
+    def __init__(self, browser, url: str) -> None:
+        self.errors: list[str] = []
+        self.hosts: set[str] = set()
+        self.page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        self.page.on("console", lambda m: self.errors.append(f"console: {m.text}") if m.type == "error" else None)
+        self.page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
+        self.page.on("requestfailed", lambda r: self.errors.append(f"request failed: {r.url} {r.failure}"))
+        self.page.on("request", lambda r: self.hosts.add(urlparse(r.url).netloc))
+        self.page.on("response", lambda r: self.errors.append(f"{r.status} for {r.url}") if r.status >= 400 else None)
+        response = self.page.goto(url, wait_until="networkidle", timeout=60_000)
+        assert response is not None and response.status == 200, url
+
+    def images_loaded(self) -> list[tuple[str, int]]:
+        return self.page.eval_on_selector_all("img", "els => els.map(e => [e.getAttribute('src'), e.naturalWidth])")
+
+    def finish(self, name: str, base: str) -> None:
+        OUTPUT.mkdir(parents=True, exist_ok=True)
+        self.page.screenshot(path=str(OUTPUT / f"{name}.png"), full_page=True)
+        self.page.close()
+        assert not self.errors, self.errors
+        assert self.hosts <= {urlparse(base).netloc}, f"asked hosts other than the service: {self.hosts}"
+
+
+def _submit(base: str, path: str, body: dict) -> str:
+    r = httpx.post(base + path, json=body, timeout=30)
+    assert r.status_code == 202, r.text
+    return r.headers["location"]
+
+
+def _wait_ensemble(base: str, location: str) -> dict:
+    with httpx.Client(base_url=base, timeout=30) as client:
+        return poll_job(client, location, timeout=180, interval=0.2)
+
+
+def test_job_page_shows_system_evidence_plots_and_exports(api, browser):
+    location = _submit(api, "/v1/jobs", JOB)
+    with httpx.Client(base_url=api, timeout=30) as client:
+        job = poll_job(client, location, timeout=120, interval=0.1)
+    assert job["status"] == "succeeded", job
+    result = job["result"]
+    visit = Visit(browser, f"{api}{location}/page")
+    page = visit.page
+    assert job["id"] in page.title()
+    assert "Chaplygin" in page.locator("h1").inner_text()
+    # one row per integral and per check, each with its verdict
+    assert page.locator("#integrals tr").count() == 1 + len(result["integrals"])
+    assert page.locator("#integrals .passed").count() == len(result["integrals"])
+    assert page.locator("#checks tr").count() == 1 + len(result["checks"])
+    assert page.locator("#system").inner_text().count("kg m^2") >= 2  # parameters with their units
+    assert page.locator("#lyapunov tr").count() == 1 + len(result["lyapunov"]["exponents"])
+    assert str(result["poincare"]["count"]) in page.locator("#poincare").inner_text()
+    images = visit.images_loaded()
+    assert sorted(src.split("/")[-1] for src, _ in images) == ["integrals.png", "lyapunov.png", "poincare.png",
+                                                                "trajectory.png"]
+    assert all(width > 300 for _, width in images), images
+    hrefs = page.eval_on_selector_all("#links a", "els => els.map(e => e.getAttribute('href'))")
+    assert f"{location}/trajectory?format=csv" in hrefs and f"{location}/trajectory?format=npz" in hrefs
+    assert page.locator("meta[http-equiv=refresh]").count() == 0  # finished: no reload
+    visit.finish("job", api)
+
+
+def test_ensemble_page_shows_summary_members_and_plots(api, browser):
+    location = _submit(api, "/v1/ensembles", ENSEMBLE)
+    ensemble = _wait_ensemble(api, location)
+    assert ensemble["status"] == "succeeded", ensemble
+    visit = Visit(browser, f"{api}{location}/page")
+    page = visit.page
+    assert page.locator("#members tr").count() == 1 + ENSEMBLE["members"]["sample"]["count"]
+    summary = page.locator("#summary").inner_text()
+    assert "members succeeded\t8" in summary or "members succeeded 8" in summary, summary
+    assert f"{ensemble['summary']['section_points']['total']}" in summary
+    images = visit.images_loaded()
+    assert sorted(src.split("/")[-1] for src, _ in images) == ["exponents.png", "poincare.png"]
+    assert all(width > 300 for _, width in images), images
+    visit.finish("ensemble", api)
+
+
+def test_report_page_shows_every_claim_with_its_verdict(api, browser):
+    location = _submit(api, "/v1/paper/report", {"claims": REPORT_CLAIMS})
+    with httpx.Client(base_url=api, timeout=30) as client:
+        job = poll_job(client, location, timeout=240, interval=0.2)
+    assert job["status"] == "succeeded", job
+    job_id = job["id"]
+    for url in (f"{api}/v1/paper/report/{job_id}", f"{api}/v1/jobs/{job_id}/page"):
+        visit = Visit(browser, url)
+        page = visit.page
+        rows = page.locator("table.report tr[id]")
+        assert rows.count() == len(REPORT_CLAIMS)
+        for row in job["result"]["rows"]:
+            cell = page.locator(f"tr[id='{row['id']}'] td.v")
+            assert cell.inner_text() == row["verdict"]
+        visit.finish("report", api)
+
+
+def test_docs_render_offline_with_every_operation(api, browser):
+    spec = httpx.get(f"{api}/openapi.json").json()
+    operations = sum(1 for methods in spec["paths"].values() for m in methods if m in ("get", "post", "delete"))
+    visit = Visit(browser, f"{api}/docs")
+    page = visit.page
+    page.wait_for_selector(".swagger-ui .info .title", timeout=30_000)
+    assert "nonholonomic" in page.locator(".swagger-ui .info .title").inner_text()
+    page.wait_for_selector(".opblock", timeout=30_000)
+    assert page.locator(".opblock").count() == operations
+    visit.finish("docs", api)
