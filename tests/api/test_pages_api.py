@@ -86,3 +86,19 @@ def test_an_ensemble_page_and_its_plots(client):
     none = client.get(f"{r.headers['location']}/plots/poincare.png")
     assert none.status_code == 409
     assert client.get("/v1/ensembles/nope/page").status_code == 404
+
+
+def test_the_result_names_the_service_and_the_libraries_that_computed_it(client):
+    import subprocess
+    from importlib import metadata
+
+    from tests.support import ROOT
+
+    integration = _finished(client)["result"]["integration"]
+    assert set(integration["versions"]) == {"heyoka", "sympy", "numpy", "scipy"}
+    assert integration["versions"]["sympy"] == metadata.version("sympy")
+    project = integration["project"]
+    assert project["name"] == "nonholonomic" and project["version"] == metadata.version("nonholonomic")
+    if (ROOT / ".git").exists():
+        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+        assert project["commit"].split("+")[0] == head
