@@ -119,7 +119,8 @@ def ensemble_summary(view: Mapping[str, Any]) -> str:
                      f"{points.get('max_per_member')} per member)")
     drift = summary.get("worst_integral_drift") or {}
     if drift:
-        lines.append("  worst integral drift: " + ", ".join(f"{k} {_num(v)}" for k, v in drift.items()))
+        lines.append("  worst integral drift: " + ", ".join(f"{k} {'not finite' if v is None else _num(v)}"
+                                                          for k, v in drift.items()))
     for failure in summary.get("failures") or []:
         lines.append(f"  member {failure.get('index')} failed: {failure.get('error')}")
     return "\n".join(lines)

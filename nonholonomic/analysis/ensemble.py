@@ -193,7 +193,11 @@ def digest(member: MemberResult) -> dict[str, Any]:
 
 def summarize(digests: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """Reduce member digests: counts, the worst drift of each integral, failed checks, statistics of
-    the largest exponents, the section's points."""
+    the largest exponents, the section's points.
+
+    The summary is JSON without NaN or infinity: an integral whose drift is not finite for some member
+    has the worst drift None, and the exponents' statistics are over the finite ones (``non_finite``
+    counts the others)."""
     ok = [d for d in digests if d["status"] == "succeeded"]
     failed = [d for d in digests if d["status"] != "succeeded"]
     worst: dict[str, float] = {}
@@ -203,13 +207,17 @@ def summarize(digests: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     summary: dict[str, Any] = {
         "members": len(digests), "succeeded": len(ok), "failed": len(failed),
         "failures": [{"index": d["index"], "error": d.get("error")} for d in failed[:20]],
-        "worst_integral_drift": worst,
+        "worst_integral_drift": {name: drift if math.isfinite(drift) else None for name, drift in worst.items()},
         "members_with_failed_checks": sum(1 for d in ok if d.get("checks_failed")),
     }
     exponents = np.array([d["largest_exponent"] for d in ok if "largest_exponent" in d], dtype=float)
+    non_finite = int(np.count_nonzero(~np.isfinite(exponents)))
+    exponents = exponents[np.isfinite(exponents)]
+    if exponents.size or non_finite:
+        summary["largest_exponent"] = {"count": int(exponents.size), "non_finite": non_finite}
     if exponents.size:
-        summary["largest_exponent"] = {
-            "count": int(exponents.size), "min": float(exponents.min()), "median": float(np.median(exponents)),
+        summary["largest_exponent"] |= {
+            "min": float(exponents.min()), "median": float(np.median(exponents)),
             "mean": float(exponents.mean()), "max": float(exponents.max()),
             "quartiles": [float(q) for q in np.quantile(exponents, [0.25, 0.5, 0.75])]}
     points = [d["section_points"] for d in ok if "section_points" in d]

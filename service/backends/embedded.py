@@ -33,6 +33,7 @@ class EmbeddedBackend:
         self._threads = settings.embedded_workers
         self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="nonholonomic-job")
         self.ensembles = MemoryEnsembleStore()
+        self._ensemble_ids: list[str] = []
         self._warm = threading.Event()
         if settings.warm_up:  # in its own thread, so the first jobs need not wait behind it
             threading.Thread(target=self._warm_up, daemon=True, name="nonholonomic-warm-up").start()
@@ -90,6 +91,7 @@ class EmbeddedBackend:
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]]) -> tuple[str, str]:
         ensemble_id = str(uuid.uuid4())
         created_at = self.ensembles.create(ensemble_id, request, chunks)
+        self._ensemble_ids.append(ensemble_id)
         for chunk in range(len(chunks)):
             self._pool.submit(run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded")
         return ensemble_id, created_at
@@ -129,6 +131,9 @@ class EmbeddedBackend:
                 "workers": {"threads": self._threads, "warm": warm}}
 
     def close(self) -> None:
+        """Stop every job and ensemble chunk at its next progress report, drop what is queued."""
         for event in self._cancel.values():
             event.set()
+        for ensemble_id in self._ensemble_ids:
+            self.ensembles.cancel(ensemble_id)
         self._pool.shutdown(wait=False, cancel_futures=True)

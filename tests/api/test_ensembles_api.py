@@ -167,3 +167,33 @@ def test_cancel_stops_every_chunk(client):
     after = client.get(location).json()
     assert after["status"] == "cancelled" and after["members_done"] == done < 40
     assert client.delete(location).status_code == 202  # still not finished: cancelling again is harmless
+
+
+def test_closing_the_app_stops_a_running_ensemble(monkeypatch):
+    """Embedded mode: shutting the API down cancels running chunks (they stop at their next progress
+    report) instead of computing on after the server is gone."""
+    import threading
+
+    from fastapi.testclient import TestClient
+
+    from schemas.settings import get_settings
+    from service.main import create_app
+
+    monkeypatch.delenv("REDIS_URL", raising=False)
+    monkeypatch.setenv("NONHOLONOMIC_WARM_UP", "false")
+    monkeypatch.setenv("NONHOLONOMIC_MAX_T_FINAL", "1e9")
+    get_settings.cache_clear()
+    body = {"system": dict(BALL), "members": {"initial_states": [dict(STATE)]}, "t_final": 1e7}
+    with TestClient(create_app()) as c:
+        location = c.post("/v1/ensembles", json=body).headers["location"]
+        deadline = time.monotonic() + 20
+        while c.get(location).json()["status"] == "queued" and time.monotonic() < deadline:
+            time.sleep(0.02)
+        backend = c.app.state.backend
+        ensemble_id = location.rsplit("/", 1)[1]
+    get_settings.cache_clear()
+    assert backend.ensembles.record(ensemble_id)["cancelled"]
+    deadline = time.monotonic() + 10
+    while any(t.name.startswith("nonholonomic-job") for t in threading.enumerate()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(t.name.startswith("nonholonomic-job") for t in threading.enumerate())

@@ -47,3 +47,19 @@ def test_summarize_counts_failures_and_reduces_the_exponents():
     assert s["worst_integral_drift"] == {"energy": 3e-15} and s["members_with_failed_checks"] == 1
     assert math.isclose(s["largest_exponent"]["mean"], 0.2) and s["largest_exponent"]["max"] == 0.3
     assert s["section_points"] == {"total": 14, "min_per_member": 4, "max_per_member": 10}
+
+
+def test_summary_is_json_without_nan_or_infinity():
+    """A member whose integral or exponent is not finite must not make the summary unserialisable
+    (the API answers with allow_nan=False): the worst drift is None, the exponent is counted apart."""
+    import json
+
+    digests = [{"index": 0, "status": "succeeded", "integral_drift": {"energy": 1e-15, "area": float("nan")},
+                "largest_exponent": 0.1},
+               {"index": 1, "status": "succeeded", "integral_drift": {"energy": float("inf"), "area": 2e-15},
+                "largest_exponent": float("nan")}]
+    s = summarize(digests)
+    json.dumps(s, allow_nan=False)
+    assert s["worst_integral_drift"] == {"energy": None, "area": None}
+    assert s["largest_exponent"]["count"] == 1 and s["largest_exponent"]["non_finite"] == 1
+    assert s["largest_exponent"]["max"] == 0.1
