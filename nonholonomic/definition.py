@@ -46,6 +46,13 @@ def upper_triangle(matrix: sp.Matrix) -> tuple[sp.Symbol, ...]:
     return tuple(matrix[i, j] for i in range(3) for j in range(i, 3))
 
 
+#: Admissible magnitudes of a parameter's components: beyond them the equations' products and powers
+#: overflow or lose every digit in double precision (e.g. D = 1e308, or inertia 1e-308 beside 1e308).
+MAX_PARAMETER_MAGNITUDE = 1e12
+#: The smallest admissible value of a strictly positive parameter (``> 0``).
+MIN_POSITIVE_PARAMETER = 1e-12
+
+
 @dataclass(frozen=True)
 class Parameter:
     """A named group of parameters, as a request spells it (``inertia``, ``D``, ``a``, ``B`` ...).
@@ -91,9 +98,14 @@ class Parameter:
             parts.append("symmetric 3x3 matrix, or 3 numbers for a diagonal one")
             if self.positive_definite:
                 parts.append("positive definite")
-        if self.minimum is not None:
-            parts.append(f"{'>' if self.strict else '>='} {self.minimum:g}")
-        return "; ".join(parts) or "any finite number"
+        top = f"{MAX_PARAMETER_MAGNITUDE:g}"
+        if self.minimum is None:
+            parts.append(f"-{top} .. {top}")
+        elif self.strict and self.minimum == 0:
+            parts.append(f"> 0: {MIN_POSITIVE_PARAMETER:g} .. {top}")
+        else:
+            parts.append(f"{'>' if self.strict else '>='} {self.minimum:g}, at most {top}")
+        return "; ".join(parts)
 
     @property
     def is_vector(self) -> bool:
@@ -130,6 +142,13 @@ class Parameter:
                 raise ValueError(f"needs {len(self.symbols)} component(s), got {len(values)}")
         if not all(np.isfinite(values)):
             raise ValueError("non-finite number")
+        large = [v for v in np.atleast_1d(array).ravel().tolist() if abs(v) > MAX_PARAMETER_MAGNITUDE]
+        if large:
+            raise ValueError(f"must be {self.admissible}, got {large[0]:g}")
+        if self.strict and self.minimum == 0 and self.shape != "symmetric_matrix":
+            tiny = [v for v in values if 0 < v < MIN_POSITIVE_PARAMETER]
+            if tiny:
+                raise ValueError(f"must be {self.admissible}, got {tiny[0]:g}")
         if self.minimum is not None and self.shape != "symmetric_matrix":
             bad = [v for v in values if (v <= self.minimum if self.strict else v < self.minimum)]
             if bad:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import asdict
 from typing import Any, Literal
 
@@ -201,3 +203,27 @@ class MemberResultModel(BaseModel):
     warnings: list[str] | None = None
     poincare: dict[str, Any] | None = None
     lyapunov: dict[str, Any] | None = None
+
+
+def first_non_finite(value: Any, path: str = "") -> tuple[str, float] | None:
+    """The first NaN or infinity in a JSON-like result, as (dotted path, value), or None.
+
+    A result must be JSON (RFC 8259 has no NaN or infinity); a job whose numbers overflow fails instead.
+    """
+    if isinstance(value, float):
+        return None if math.isfinite(value) else (path, value)
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, (list, tuple)):
+        if value and all(isinstance(v, float) for v in value):  # a numeric row: one vectorised test
+            bad = next((i for i, v in enumerate(value) if not math.isfinite(v)), None)
+            return None if bad is None else (f"{path}[{bad}]", value[bad])
+        items = ((f"[{i}]", v) for i, v in enumerate(value))  # type: ignore[assignment]
+    else:
+        return None
+    for key, item in items:
+        where = f"{path}{key}" if str(key).startswith("[") else (f"{path}.{key}" if path else str(key))
+        found = first_non_finite(item, where)
+        if found is not None:
+            return found
+    return None

@@ -20,6 +20,7 @@ class Settings(BaseSettings):
     queue: str = Field("nonholonomic", description="Celery queue the API sends jobs to and workers consume")
     max_t_final: float = Field(1e5, gt=0, description="largest accepted t_final")
     max_samples: int = Field(100_001, ge=2, description="largest accepted number of samples")
+    max_body_bytes: int = Field(1 << 20, ge=1024, description="largest accepted request body (bytes); above: 413")
     max_section_points: int = Field(100_000, ge=1, description="largest accepted poincare.max_points")
     max_ensemble_members: int = Field(100_000, ge=1, description="largest number of members of one ensemble")
     max_ensemble_values: int = Field(2_000_000, ge=1,

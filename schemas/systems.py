@@ -11,12 +11,15 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, create_model
 
-from nonholonomic.definition import MechanicalSystem, Parameter
+from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
 from nonholonomic.potentials import Potential
 from nonholonomic.systems import SYSTEMS, get_system
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
-Vec3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
+#: Admissible state components (initial states, vectors): beyond, the equations' products overflow.
+MAX_STATE_MAGNITUDE = 1e12
+StateFloat = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_STATE_MAGNITUDE, le=MAX_STATE_MAGNITUDE)]
+Vec3 = Annotated[list[StateFloat], Field(min_length=3, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 
 
@@ -34,11 +37,20 @@ def _checked_by_core(par: Parameter) -> AfterValidator:
     return AfterValidator(check)
 
 
+def _at_least_min_positive(value: float) -> float:
+    if value < MIN_POSITIVE_PARAMETER:
+        raise ValueError(f"must be at least {MIN_POSITIVE_PARAMETER:g} (> 0; smaller values overflow the equations)")
+    return value
+
+
 def _parameter_field(par: Parameter) -> tuple[Any, Any]:
-    bounds: dict[str, float] = {}
+    bounds: dict[str, float] = {"ge": -MAX_PARAMETER_MAGNITUDE, "le": MAX_PARAMETER_MAGNITUDE}
     if par.minimum is not None:
+        bounds.pop("ge")
         bounds["gt" if par.strict else "ge"] = par.minimum
     number = Annotated[float, Field(allow_inf_nan=False, **bounds)]
+    if par.strict and par.minimum == 0:  # the core's smallest positive value, checked per component
+        number = Annotated[number, AfterValidator(_at_least_min_positive)]
     annotation: Any = number
     if par.shape == "vector":
         annotation = Annotated[list[number], Field(min_length=3, max_length=3)]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
@@ -84,10 +85,29 @@ def field_path(loc: Sequence[Any], body: Any) -> str:
     return "".join(parts) or "body"
 
 
-def _respond(problem: Problem, request: Request) -> JSONResponse:
+class ProblemResponse(JSONResponse):
+    """``application/problem+json`` as ASCII JSON: a problem may quote the offending input, and a lone
+    surrogate (``"\\ud800"`` as a key) cannot be encoded as UTF-8 but can be escaped."""
+
+    media_type = PROBLEM_MEDIA_TYPE
+
+    def render(self, content: Any) -> bytes:
+        return json.dumps(content, ensure_ascii=True, allow_nan=False, separators=(",", ":")).encode("ascii")
+
+
+def _respond(problem: Problem, request: Request, headers: Mapping[str, str] | None = None) -> JSONResponse:
     problem.instance = problem.instance or request.url.path
-    return JSONResponse(problem.model_dump(exclude_none=True), status_code=problem.status,
-                        media_type=PROBLEM_MEDIA_TYPE)
+    return ProblemResponse(problem.model_dump(exclude_none=True), status_code=problem.status, headers=headers)
+
+
+def _allowed_methods(request: Request) -> list[str]:
+    """Every method some route answers on this path (for a 405's ``Allow``): the routes are asked as
+    if the request had each method."""
+    from starlette.routing import Match
+
+    routes = request.app.router.routes
+    return [method for method in ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE")
+            if any(route.matches({**request.scope, "method": method})[0] == Match.FULL for route in routes)]
 
 
 def install_error_handlers(app: FastAPI) -> None:
@@ -123,7 +143,10 @@ def install_error_handlers(app: FastAPI) -> None:
             reason = "body is not valid JSON" + (f": {cause}" if cause is not None else "")
             return _respond(invalid_request([FieldError(field="body", reason=reason)]).problem, request)
         title = {404: "Not Found", 405: "Method Not Allowed"}.get(exc.status_code, "HTTP error")
-        return _respond(Problem(title=title, status=exc.status_code, detail=str(exc.detail)), request)
+        headers = dict(exc.headers or {})
+        if exc.status_code == 405:  # Starlette names the first matching route's methods only
+            headers["Allow"] = ", ".join(_allowed_methods(request))
+        return _respond(Problem(title=title, status=exc.status_code, detail=str(exc.detail)), request, headers)
 
     @app.exception_handler(redis.RedisError)
     @app.exception_handler(OperationalError)

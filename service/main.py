@@ -15,6 +15,7 @@ import nonholonomic
 from schemas.settings import Settings, get_settings
 from service.backends import make_backend
 from service.errors import install_error_handlers
+from service.limits import BodyLimit
 from service.routes import ensembles, health, jobs, maps, pages, report, symbolic, systems
 
 
@@ -37,6 +38,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     install_error_handlers(app)
+    app.add_middleware(BodyLimit, limit=(settings or get_settings()).max_body_bytes)
     app.include_router(health.router)
     app.include_router(systems.router)
     app.include_router(jobs.router)

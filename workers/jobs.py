@@ -9,12 +9,16 @@ from nonholonomic.integration import ProgressCallback
 from nonholonomic.simulation import simulate
 from schemas.jobs import JobRequest
 from schemas.report import REPORT_JOB, PaperReportRequest
-from schemas.results import result_to_json
+from schemas.results import first_non_finite, result_to_json
 from workers.provenance import project
 
 
 class InvalidJob(ValueError):
     """The request fails validation (normally caught by the API before anything is queued)."""
+
+
+class NonFiniteResult(ArithmeticError):
+    """A number of the result is NaN or infinite (it overflowed); the job fails naming it."""
 
 
 def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -> dict[str, Any]:
@@ -48,6 +52,10 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
         lyapunov=job.lyapunov.options() if job.lyapunov else None,
     )
     out = result_to_json(result, parameters)
+    found = first_non_finite(out)
+    if found is not None:
+        raise NonFiniteResult(f"{found[0]} is {found[1]}: the numbers of this job overflow double precision "
+                              "(parameters or initial state too large or too small for each other)")
     out["integration"]["project"] = project()
     return out
 

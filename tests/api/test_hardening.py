@@ -1,0 +1,95 @@
+"""Input that used to end in a 500, a non-JSON result or an unbounded read (issue "Nothing lost,
+nobody locked out", its first cases): each is a 4xx problem naming the field, before anything is
+queued."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.api.conftest import BALL, STATE, job
+
+PROBLEM = "application/problem+json"
+
+
+def _fields(r) -> list[str]:
+    assert r.headers["content-type"] == PROBLEM, r.text
+    return [e["field"] for e in r.json()["errors"]]
+
+
+def test_a_lone_surrogate_as_a_state_name_is_a_422_not_a_500(client):
+    body = ('{"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7}, '
+            '"initial_state": {"\\ud800": [1, 2, 3], "gamma": [0, 0.6, 0.8]}, "t_final": 1.0}')
+    r = client.post("/v1/jobs", content=body, headers={"content-type": "application/json"})
+    assert r.status_code == 422
+    assert "initial_state.\ud800" in _fields(r)  # escaped on the wire (ASCII JSON), the same string decoded
+    assert b"\\ud800" in r.content
+
+
+@pytest.mark.parametrize("system,state,field", [
+    ({**BALL, "D": 1e308}, STATE, "system.D"),
+    (BALL, {"M": [1e308, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "initial_state.M[0]"),
+    ({**BALL, "inertia": [1e-308, 3.0, 4.5]}, STATE, "system.inertia[0]"),
+    ({**BALL, "inertia": [2.0, 1e308, 1e308]}, STATE, "system.inertia[1]"),
+    ({**BALL, "potential": {"kind": "linear", "a": [1e13, 0.0, 0.0]}}, STATE, "system.potential.a[0]"),
+])
+def test_magnitudes_that_overflow_are_refused_naming_the_field(client, system, state, field):
+    r = client.post("/v1/jobs", json=job(system=system, initial_state=state))
+    assert r.status_code == 422 and field in _fields(r), r.text
+
+
+def test_the_catalog_states_the_admissible_magnitudes(client):
+    ball = client.get("/v1/systems/chaplygin_ball").json()
+    text = str(ball)
+    assert "1e+12" in text and "1e-12" in text
+
+
+def test_the_largest_admissible_values_still_run(client):
+    from tests.support import poll_job
+
+    r = client.post("/v1/jobs", json=job(system={**BALL, "inertia": [1e12, 1e12, 1e12], "D": 1e12}, t_final=1.0))
+    assert r.status_code == 202, r.text
+    view = poll_job(client, r.headers["location"])
+    assert view["status"] == "succeeded", view
+    assert all(i["passed"] for i in view["result"]["integrals"])
+
+
+def test_a_result_with_a_non_finite_number_fails_the_job_naming_it(monkeypatch):
+    from schemas import results
+    from workers import jobs
+
+    real = results.result_to_json
+
+    def overflowing(result, parameters):
+        out = real(result, parameters)
+        out["trajectory"]["M"][3][1] = float("inf")
+        return out
+
+    monkeypatch.setattr(jobs, "result_to_json", overflowing)
+    with pytest.raises(jobs.NonFiniteResult, match=r"trajectory\.M\[3\]\[1\] is inf"):
+        jobs.run_job(job())
+    assert results.first_non_finite({"a": [1.0, {"b": [0.0, float("nan")]}]}) == ("a[1].b[1]", pytest.approx(float("nan"),
+                                                                                                        nan_ok=True))
+    assert results.first_non_finite({"a": [1.0, 2.0], "b": None, "c": "x"}) is None
+
+
+def test_405_names_the_allowed_methods(client):
+    r = client.put("/v1/jobs")
+    assert r.status_code == 405 and r.headers["content-type"] == PROBLEM
+    assert set(r.headers["allow"].replace(" ", "").split(",")) == {"GET", "POST"}
+
+
+def test_a_body_above_the_limit_is_a_413_before_it_is_read(client):
+    from schemas.settings import get_settings
+
+    limit = get_settings().max_body_bytes
+    big = b'{"pad": "' + b"x" * limit + b'"}'
+    r = client.post("/v1/jobs", content=big, headers={"content-type": "application/json"})
+    assert r.status_code == 413 and _fields(r) == ["body"] and str(limit) in r.json()["detail"]
+
+    def chunks():  # no Content-Length: counted as it arrives
+        for _ in range(limit // 65536 + 2):
+            yield b"x" * 65536
+
+    r = client.post("/v1/jobs", content=chunks(), headers={"content-type": "application/json"})
+    assert r.status_code == 413 and _fields(r) == ["body"]
+    assert client.post("/v1/jobs", json=job()).status_code == 202  # a normal body still passes
