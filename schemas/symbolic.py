@@ -10,7 +10,10 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from schemas.systems import FiniteFloat
+from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE
+
+#: A named constant's value (as a system parameter's: beyond, the pointwise checks overflow).
+Constant = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE, le=MAX_PARAMETER_MAGNITUDE)]
 
 Expression = Annotated[str, Field(min_length=1, max_length=2000, description="expression, e.g. 'x*y - z'")]
 Name = Annotated[str, Field(min_length=1, max_length=32)]
@@ -29,7 +32,7 @@ class BracketVerifyRequest(BaseModel):
     variables: list[Name] = Field(min_length=1, max_length=12)
     matrix: list[list[Expression]] = Field(description="matrix[i][j] = {variables[i], variables[j]}")
     casimirs: dict[Name, Expression] = Field(default_factory=dict, description="candidate Casimir functions by name")
-    parameters: dict[Name, FiniteFloat] = Field(
+    parameters: dict[Name, Constant] = Field(
         default_factory=dict, description="named constants: symbolic in the proofs, these values in pointwise checks")
     symbols: list[Name] = Field(default_factory=list, description="further names kept symbolic (no value)")
     budget_s: float = Field(10.0, gt=0, le=MAX_BUDGET_S, description="seconds allowed for each symbolic proof")
@@ -71,7 +74,7 @@ class HamiltonizeRequest(BaseModel):
     a2: Expression
     b: Expression
     potential: Expression | None = Field(None, description="U(q), if not already in the Lagrangian")
-    parameters: dict[Name, FiniteFloat] = Field(default_factory=dict)
+    parameters: dict[Name, Constant] = Field(default_factory=dict, description="values of the named constants")
     symbols: list[Name] = Field(default_factory=list, description="names kept symbolic (e.g. I1, I2, I3)")
     budget_s: float = Field(20.0, gt=0, le=MAX_BUDGET_S)
     monopole: MonopoleRequest | None = Field(

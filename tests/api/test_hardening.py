@@ -93,3 +93,13 @@ def test_a_body_above_the_limit_is_a_413_before_it_is_read(client):
     r = client.post("/v1/jobs", content=chunks(), headers={"content-type": "application/json"})
     assert r.status_code == 413 and _fields(r) == ["body"]
     assert client.post("/v1/jobs", json=job()).status_code == 202  # a normal body still passes
+
+
+def test_a_huge_constant_in_a_bracket_is_a_422_not_an_overflow(client):
+    body = {"variables": ["x", "y", "z"], "matrix": [["0", "a*z", "-y"], ["-a*z", "0", "x"], ["y", "-x", "0"]],
+            "parameters": {"a": 1e308}, "casimirs": {"norm": "x**2 + y**2 + a*z**2"}}
+    r = client.post("/v1/brackets/verify", json=body)
+    assert r.status_code == 422 and _fields(r) == ["parameters.a"]
+    body["parameters"]["a"] = 1e12  # the largest admissible value is checked, not refused
+    r = client.post("/v1/brackets/verify", json=body)
+    assert r.status_code == 200, r.text
