@@ -103,3 +103,10 @@ def test_a_huge_constant_in_a_bracket_is_a_422_not_an_overflow(client):
     body["parameters"]["a"] = 1e12  # the largest admissible value is checked, not refused
     r = client.post("/v1/brackets/verify", json=body)
     assert r.status_code == 200, r.text
+
+
+@pytest.mark.parametrize("body", [b'{"t_final": "\xff\xfe"}', b"[" * 100_000 + b"]" * 100_000],
+                         ids=["not UTF-8", "nested 100000 deep"])
+def test_bodies_json_cannot_read_are_a_422_naming_the_body(client, body):
+    r = client.post("/v1/jobs", content=body, headers={"content-type": "application/json"})
+    assert r.status_code == 422 and _fields(r) == ["body"] and r.json()["type"] == "/problems/invalid-request"
