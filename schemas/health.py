@@ -16,8 +16,30 @@ class EmbeddedWorkers(BaseModel):
     warm: bool = Field(description="whether the kernels are compiled (warm-up done)")
 
 
+class QueueWorker(BaseModel):
+    """Queue mode: a live worker (from its heartbeat, at most 10 s old)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    queues: list[str] = Field(description="the queues it consumes")
+    warm_processes: int = Field(description="its pool processes that finished the warm-up")
+
+
+class SymbolicPoolStatus(BaseModel):
+    """The symbolic endpoints' pool: its bounds and occupancy."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    size: int
+    queue: int
+    running: int
+    waiting: int
+    refused: int = Field(description="requests answered 503 since the API started")
+
+
 class Health(BaseModel):
-    """Status of the API, the broker and the workers; 200 when jobs can run, else 503 with ``degraded``."""
+    """Status of the API, the broker and the workers; 200 when a job would start now (a warm worker on the
+    queue), else 503 with ``degraded`` and a ``detail`` saying why."""
 
     status: Literal["ok", "degraded"]
     api: Literal["ok"]
@@ -25,5 +47,7 @@ class Health(BaseModel):
     mode: Literal["embedded", "queue"]
     broker: str = Field(description="'ok', 'none (embedded)' or 'unreachable: <reason>'")
     queue: str | None = Field(None, description="queue mode: the Celery queue the jobs go to")
-    workers: EmbeddedWorkers | dict[str, list[str]] = Field(
-        description="embedded mode: threads and warm-up; queue mode: each live worker with the queues it consumes")
+    workers: EmbeddedWorkers | dict[str, QueueWorker] = Field(
+        description="embedded mode: threads and warm-up; queue mode: each live worker, its queues and warm processes")
+    symbolic: SymbolicPoolStatus
+    detail: str | None = Field(None, description="why jobs cannot start now (with 'degraded')")

@@ -11,6 +11,7 @@ NOT_FOUND = "/problems/not-found"
 CONFLICT = "/problems/conflict"
 UNAVAILABLE = "/problems/unavailable"
 TIMEOUT = "/problems/timeout"
+OVERLOADED = "/problems/overloaded"
 INTERNAL = "/problems/internal-error"
 
 

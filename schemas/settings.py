@@ -32,6 +32,11 @@ class Settings(BaseSettings):
     visibility_timeout_s: float = Field(3600.0, gt=0, description="broker redelivery timeout (> time limits)")
     job_ttl_s: int = Field(7 * 24 * 3600, gt=0, description="how long job records and results are kept")
     embedded_workers: int = Field(1, ge=1, description="threads running jobs in embedded mode")
+    symbolic_workers: int = Field(2, ge=1, description="symbolic requests running at once (child processes)")
+    symbolic_queue: int = Field(8, ge=0, description="symbolic requests waiting for a slot; beyond: 503 with Retry-After")
+    max_symbolic_expressions: int = Field(200, ge=1, description="most expressions in one symbolic request")
+    max_symbolic_characters: int = Field(40_000, ge=1,
+                                         description="most characters of expressions in one symbolic request")
     warm_up: bool = Field(True, description="compile the integrators when a worker (or embedded API) starts")
 
     @property

@@ -54,9 +54,10 @@ class ProblemError(Exception):
     """Raise to answer with a problem (any status)."""
 
     def __init__(self, status: int, title: str, detail: str, type_: str = "about:blank",
-                 errors: Sequence[FieldError] = ()) -> None:
+                 errors: Sequence[FieldError] = (), headers: Mapping[str, str] | None = None) -> None:
         super().__init__(detail)
         self.problem = Problem(type=type_, title=title, status=status, detail=detail, errors=list(errors))
+        self.headers = dict(headers or {})
 
 
 def invalid_request(errors: Sequence[FieldError]) -> ProblemError:
@@ -118,7 +119,7 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(ProblemError)
     async def _problem(request: Request, exc: ProblemError) -> JSONResponse:
-        return _respond(exc.problem.model_copy(), request)
+        return _respond(exc.problem.model_copy(), request, exc.headers)
 
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -15,12 +15,22 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-#: Seconds a child may take beyond the request's own symbolic budget (numeric checks, start-up).
-GRACE_S = 30.0
+#: Seconds a child may take beyond the request's own budget (start-up, numeric checks, the answer).
+GRACE_S = 10.0
 
 _CONTEXT = multiprocessing.get_context("forkserver")
 _CONTEXT.set_forkserver_preload(["nonholonomic.reducing_multiplier", "nonholonomic.evidence.brackets",
                                  "service.routes.symbolic"])
+
+
+def start_fork_server() -> None:
+    """Start the fork server and wait for its preloaded imports (about a second of CPU), at the API's
+    start-up: during the first symbolic requests it would take a core from them and from ``/health``."""
+    run_isolated(_nothing, (), 120.0)
+
+
+def _nothing() -> None:
+    return None
 
 
 class IsolatedTimeout(RuntimeError):

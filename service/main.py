@@ -13,8 +13,10 @@ from fastapi_offline import FastAPIOffline
 
 import nonholonomic
 from schemas.settings import Settings, get_settings
+from service.admission import SymbolicPool
 from service.backends import make_backend
 from service.errors import install_error_handlers
+from service.isolated import start_fork_server
 from service.limits import BodyLimit
 from service.routes import ensembles, health, jobs, maps, pages, report, symbolic, systems
 
@@ -24,7 +26,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        app.state.backend = make_backend(settings or get_settings())
+        chosen = settings or get_settings()
+        start_fork_server()  # for the symbolic requests' child processes
+        app.state.symbolic_pool = SymbolicPool(chosen.symbolic_workers, chosen.symbolic_queue)
+        app.state.backend = make_backend(chosen)
         try:
             yield
         finally:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from celery import Celery
-from celery.signals import worker_process_init
+from celery.signals import worker_process_init, worker_process_shutdown, worker_ready, worker_shutdown
 
 from schemas.settings import get_settings
 
@@ -54,9 +54,48 @@ def make_app() -> Celery:
 app = make_app()
 
 
+_heartbeats: list[Any] = []
+
+
+def _beat(key: str, value: str) -> None:
+    from workers.heartbeat import Heartbeat
+
+    _heartbeats.append(Heartbeat(get_settings().redis_url or DEFAULT_REDIS_URL, key, lambda: value).start())
+
+
 @worker_process_init.connect
 def _warm_up(**_: Any) -> None:
+    """A pool process compiles every integrator before it takes jobs, then says it is warm."""
+    from workers.heartbeat import process_key
+
+    _heartbeats.clear()  # copies of the main process's, inherited by the fork: not ours to stop
     if get_settings().warm_up:
         from workers.jobs import warm_up
 
         warm_up()
+    _beat(process_key(), "warm")
+
+
+@worker_ready.connect
+def _announce(sender: Any = None, **_: Any) -> None:
+    """The worker's name and queues, for ``/health`` (:mod:`workers.heartbeat`)."""
+    import json
+    import os
+
+    from workers.heartbeat import process_key, worker_key
+
+    queues = sorted(q.name for q in sender.task_consumer.queues)
+    _beat(worker_key(), json.dumps({"name": sender.hostname, "queues": queues}))
+    if "prefork" not in type(sender.pool).__module__:  # solo or threads: jobs run in this process
+        if get_settings().warm_up:
+            from workers.jobs import warm_up
+
+            warm_up()
+        _beat(process_key(os.getpid()), "warm")
+
+
+@worker_process_shutdown.connect
+@worker_shutdown.connect
+def _silence(**_: Any) -> None:
+    while _heartbeats:
+        _heartbeats.pop().stop()

@@ -127,8 +127,9 @@ class EmbeddedBackend:
 
     def health(self) -> dict[str, Any]:
         warm = self._warm.is_set()
-        return {"ok": True, "mode": self.mode, "broker": "none (embedded)",
-                "workers": {"threads": self._threads, "warm": warm}}
+        detail = None if warm else "the integrators are being compiled (warm-up): jobs would wait for it"
+        return {"ok": warm, "mode": self.mode, "broker": "none (embedded)",
+                "workers": {"threads": self._threads, "warm": warm}, **({"detail": detail} if detail else {})}
 
     def close(self) -> None:
         """Stop every job and ensemble chunk at its next progress report, drop what is queued."""

@@ -9,7 +9,6 @@ messages workers reserved but did not start yet).
 
 from __future__ import annotations
 
-import time
 import uuid
 from typing import Any
 
@@ -22,6 +21,7 @@ from schemas.settings import Settings
 from service.backends.base import JobRecord, decode_cursor, encode_cursor
 from workers.celery_app import app as celery_app
 from workers.ensembles import RedisEnsembleStore
+from workers.heartbeat import census
 from workers.registry import (
     RedisJobRegistry,
     parse_task_message,
@@ -41,8 +41,8 @@ LIST_SCAN_LIMIT = 2000
 #: Index entries read per round trip while listing.
 LIST_BATCH = 200
 
-#: Seconds a census of the workers stays valid (asking them takes a full inspect timeout).
-WORKER_CENSUS_TTL_S = 5.0
+#: Seconds /health waits for Redis.
+HEALTH_TIMEOUT_S = 0.05
 
 #: Celery task state → job status.
 _STATUS = {"PENDING": "queued", "RECEIVED": "queued", "RETRY": "queued", "STARTED": "running",
@@ -75,7 +75,9 @@ class QueueBackend:
         self.redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=5)
         self.registry = RedisJobRegistry(self.redis, settings.job_ttl_s)
         self.ensembles = RedisEnsembleStore(self.redis, settings.job_ttl_s)
-        self._census: tuple[float, dict[str, list[str]]] = (-float("inf"), {})
+        # /health answers within its deadline even when Redis does not
+        self._health_redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=HEALTH_TIMEOUT_S,
+                                                  socket_connect_timeout=HEALTH_TIMEOUT_S)
 
     def submit(self, request: dict[str, Any]) -> JobRecord:
         job_id = str(uuid.uuid4())
@@ -229,26 +231,22 @@ class QueueBackend:
 
     def health(self) -> dict[str, Any]:
         try:
-            self.redis.ping()
+            workers = census(self._health_redis)
             broker = "ok"
         except redis.RedisError as exc:
-            broker = f"unreachable: {exc}"
-        workers: dict[str, list[str]] = {}
-        if broker == "ok":
-            workers = self._workers()
-        serving = [w for w, queues in workers.items() if self.settings.queue in queues]
-        return {"ok": broker == "ok" and bool(serving), "mode": self.mode, "broker": broker,
-                "queue": self.settings.queue, "workers": workers}
-
-    def _workers(self) -> dict[str, list[str]]:
-        """Queues consumed by each live worker, cached for :data:`WORKER_CENSUS_TTL_S` when non-empty."""
-        taken_at, workers = self._census
-        if workers and time.monotonic() - taken_at < WORKER_CENSUS_TTL_S:
-            return workers
-        replies = celery_app.control.inspect(timeout=1.0).active_queues() or {}
-        workers = {name: [q["name"] for q in queues] for name, queues in replies.items()}
-        self._census = (time.monotonic(), workers)
-        return workers
+            workers, broker = {}, f"unreachable: {type(exc).__name__}"
+        serving = {name: w for name, w in workers.items() if self.settings.queue in w["queues"]}
+        warm = sum(w["warm_processes"] for w in serving.values())
+        detail = None
+        if broker != "ok":
+            detail = "the broker cannot be reached: jobs cannot be queued"
+        elif not serving:
+            detail = f"no worker consumes the queue '{self.settings.queue}': jobs would wait"
+        elif not warm:
+            detail = "the workers are compiling the integrators (warm-up): jobs would wait for it"
+        return {"ok": detail is None, "mode": self.mode, "broker": broker, "queue": self.settings.queue,
+                "workers": workers, **({"detail": detail} if detail else {})}
 
     def close(self) -> None:
         self.redis.close()
+        self._health_redis.close()

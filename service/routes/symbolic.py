@@ -7,13 +7,16 @@ runs under the request's time budget; parse errors are 422 problems naming the f
 from __future__ import annotations
 
 import ast
+import time
 from collections.abc import Sequence
 from typing import Any
 
 import sympy as sp
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
+from starlette.concurrency import run_in_threadpool
 
 from schemas.problems import TIMEOUT, FieldError
+from schemas.settings import Settings, get_settings
 from schemas.symbolic import (
     BracketVerifyRequest,
     BracketVerifyResult,
@@ -26,8 +29,33 @@ from service.openapi import operation_id
 
 router = APIRouter(tags=["symbolic"], generate_unique_id_function=operation_id)
 #: The problems of the two symbolic routes.
-_ERRORS = problem_responses({408: "the symbolic work is still running at budget_s + 30 s; it was stopped",
-                             422: INVALID + " (parse errors name the field and position)"})
+_ERRORS = problem_responses({
+    408: "the symbolic work is still running at budget_s + 10 s; it was stopped",
+    422: INVALID + " (parse errors name the field and position; too many expressions or characters)",
+    503: "the symbolic pool and its wait queue are full; `Retry-After` says when to retry"})
+
+
+class FieldProblem(ValueError):
+    """A user's input refused in the child process (picklable): answered as a 422 naming ``field``."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(field, reason)
+        self.field, self.reason = field, reason
+
+
+class _Deadline:
+    """The request's budget, counted from the child's start: parsing and every symbolic step within it."""
+
+    def __init__(self, budget_s: float) -> None:
+        self.budget_s, self._end = budget_s, time.monotonic() + budget_s
+
+    def remaining(self, field: str) -> float:
+        """Seconds left; past the budget a problem naming ``budget_s`` and where the work stopped."""
+        left = self._end - time.monotonic()
+        if left <= 0:
+            raise FieldProblem("budget_s", f"reading the expressions used the whole budget ({self.budget_s:g} s; "
+                                           f"stopped at {field}): shorten them or raise budget_s")
+        return left
 
 
 def _declare(names: Sequence[str], field: str) -> dict[str, sp.Symbol]:
@@ -36,72 +64,127 @@ def _declare(names: Sequence[str], field: str) -> dict[str, sp.Symbol]:
     try:
         return declare_symbols(list(names))
     except ExpressionError as exc:
-        raise invalid_request([FieldError(field=field, reason=exc.reason)]) from None
+        raise FieldProblem(field, exc.reason) from None
 
 
-def _parse(text: str, symbols: dict[str, sp.Symbol], field: str) -> sp.Expr:
+def _parse(text: str, symbols: dict[str, sp.Symbol], field: str, deadline: _Deadline | None = None) -> sp.Expr:
     from nonholonomic.expressions import ExpressionError, parse_expression
 
+    if deadline is not None:
+        deadline.remaining(field)
     try:
         return parse_expression(text, symbols)
     except ExpressionError as exc:
-        raise invalid_request([FieldError(field=field, reason=str(exc))]) from None
+        raise FieldProblem(field, str(exc)) from None
+
+
+def _expressions(request: BracketVerifyRequest | HamiltonizeRequest) -> list[tuple[str, str]]:
+    """Every expression of a request with its field."""
+    if isinstance(request, BracketVerifyRequest):
+        return ([(f"matrix[{i}][{j}]", e) for i, row in enumerate(request.matrix) for j, e in enumerate(row)]
+                + [(f"casimirs.{name}", e) for name, e in request.casimirs.items()])
+    found = [(f, getattr(request, f)) for f in ("lagrangian", "a1", "a2", "b", "potential") if getattr(request, f)]
+    if request.monopole is not None:
+        found += [(f"monopole.domain[{i}][{j}]", e) for i, pair in enumerate(request.monopole.domain)
+                  for j, e in enumerate(pair)]
+        found += [(f"monopole.shift[{k}]", e) for k, e in enumerate(request.monopole.shift or [])]
+    return found
+
+
+def _check_size(request: BracketVerifyRequest | HamiltonizeRequest, settings: Settings) -> None:
+    """At most ``max_symbolic_expressions`` expressions and ``max_symbolic_characters`` characters (422)."""
+    found = _expressions(request)
+    field = "casimirs" if isinstance(request, BracketVerifyRequest) and request.casimirs else (
+        "matrix" if isinstance(request, BracketVerifyRequest) else "body")
+    errors = []
+    if len(found) > settings.max_symbolic_expressions:
+        errors.append(FieldError(field=field, reason=(
+            f"{len(found)} expressions in one request; at most {settings.max_symbolic_expressions} "
+            "(NONHOLONOMIC_MAX_SYMBOLIC_EXPRESSIONS)")))
+    characters = sum(len(text) for _, text in found)
+    if characters > settings.max_symbolic_characters:
+        errors.append(FieldError(field=field, reason=(
+            f"{characters} characters of expressions in one request; at most {settings.max_symbolic_characters} "
+            "(NONHOLONOMIC_MAX_SYMBOLIC_CHARACTERS)")))
+    if errors:
+        raise invalid_request(errors)
+
+
+async def _run(http: Request, fn: Any, payload: dict[str, Any], budget_s: float) -> Any:
+    """``fn(payload)`` in a child process (:mod:`service.isolated`), holding a slot of the symbolic pool
+    (:mod:`service.admission`); the child's problems become 422s, a child past its limit a 408."""
+    from service.isolated import GRACE_S, IsolatedTimeout, run_isolated
+
+    async with http.app.state.symbolic_pool.slot():
+        try:
+            return await run_in_threadpool(run_isolated, fn, (payload,), budget_s + GRACE_S)
+        except FieldProblem as exc:
+            raise invalid_request([FieldError(field=exc.field, reason=exc.reason)]) from None
+        except IsolatedTimeout as exc:
+            raise ProblemError(408, "Symbolic work timed out",
+                               f"{exc}; lower the expressions' size or raise budget_s", TIMEOUT) from None
+
+
+def _verify_in_child(payload: dict[str, Any]) -> dict[str, Any]:
+    """The bracket checks of a request (runs in the child: parsing counts against the budget)."""
+    from nonholonomic.evidence.brackets import verify_user_bracket
+
+    request = BracketVerifyRequest.model_validate(payload)
+    deadline = _Deadline(request.budget_s)
+    symbols = _declare(request.variables + list(request.parameters) + request.symbols, "variables")
+    matrix = sp.Matrix([[_parse(entry, symbols, f"matrix[{i}][{j}]", deadline) for j, entry in enumerate(row)]
+                        for i, row in enumerate(request.matrix)])
+    casimirs = {name: _parse(text, symbols, f"casimirs.{name}", deadline) for name, text in request.casimirs.items()}
+    try:
+        report = verify_user_bracket([symbols[v] for v in request.variables], matrix, casimirs,
+                                     {symbols[k]: v for k, v in request.parameters.items()},
+                                     deadline.remaining("budget_s"))
+    except FieldProblem:
+        raise
+    except ValueError as exc:
+        raise FieldProblem("matrix", str(exc)) from None
+    return {"variables": request.variables, "convention": "matrix[i][j] = {x_i, x_j}", **report}
 
 
 @router.post("/v1/brackets/verify", operation_id="symbolic-brackets-verify", response_model=BracketVerifyResult,
              response_model_exclude_unset=True, responses=_ERRORS,
              summary="Jacobi identity, Casimirs and rank of a user-given bracket")
-def verify_bracket(request: BracketVerifyRequest) -> dict[str, Any]:
-    from nonholonomic.evidence.brackets import verify_user_bracket
-
-    symbols = _declare(request.variables + list(request.parameters) + request.symbols, "variables")
-    matrix = sp.Matrix([[_parse(entry, symbols, f"matrix[{i}][{j}]") for j, entry in enumerate(row)]
-                        for i, row in enumerate(request.matrix)])
-    casimirs = {name: _parse(text, symbols, f"casimirs.{name}") for name, text in request.casimirs.items()}
-    try:
-        report = _isolated(verify_user_bracket, ([symbols[v] for v in request.variables], matrix, casimirs,
-                                                 {symbols[k]: v for k, v in request.parameters.items()},
-                                                 request.budget_s), request.budget_s)
-    except ValueError as exc:
-        raise invalid_request([FieldError(field="matrix", reason=str(exc))]) from None
-    return {"variables": request.variables, "convention": "matrix[i][j] = {x_i, x_j}", **report}
+async def verify_bracket(request: BracketVerifyRequest, http: Request) -> dict[str, Any]:
+    _check_size(request, get_settings())
+    return await _run(http, _verify_in_child, request.model_dump(), request.budget_s)  # type: ignore[no-any-return]
 
 
-def _isolated(fn: Any, args: tuple[Any, ...], budget_s: float) -> Any:
-    """``fn(*args)`` in a child process (:mod:`service.isolated`): nothing it starts outlives the request."""
-    from service.isolated import GRACE_S, IsolatedTimeout, run_isolated
-
-    try:
-        return run_isolated(fn, args, budget_s + GRACE_S)
-    except IsolatedTimeout as exc:
-        raise ProblemError(408, "Symbolic work timed out", f"{exc}; lower the expressions' size or raise budget_s",
-                           TIMEOUT) from None
-
-
-def _hamiltonize_json(args: tuple[Any, ...], kwargs: dict[str, Any]) -> dict[str, Any]:
-    """Theorem 1 for a user's system, as JSON (runs in the child process)."""
+def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
+    """Theorem 1 for a user's system, as JSON (runs in the child: parsing counts against the budget)."""
     from nonholonomic.reducing_multiplier import hamiltonize as reduce
 
-    return reduce(*args, **kwargs).to_json()
+    request = HamiltonizeRequest.model_validate(payload)
+    deadline = _Deadline(request.budget_s)
+    names = request.coordinates + request.velocities + list(request.parameters) + request.symbols
+    symbols = _declare(names, "coordinates")
+    parsed = {field: _parse(getattr(request, field), symbols, field, deadline)
+              for field in ("lagrangian", "a1", "a2", "b")}
+    potential = None if request.potential is None else _parse(request.potential, symbols, "potential", deadline)
+    domain, shift, multiplier = _monopole(request, symbols)
+    args = (parsed["lagrangian"], tuple(symbols[q] for q in request.coordinates),
+            tuple(symbols[v] for v in request.velocities), parsed["a1"], parsed["a2"], parsed["b"], potential,
+            {symbols[k]: v for k, v in request.parameters.items()})
+    kwargs = {"budget_s": deadline.remaining("budget_s"), "domain": domain, "shift": shift,
+              "multiplier_symbol": multiplier}
+    try:
+        return reduce(*args, **kwargs).to_json()
+    except FieldProblem:
+        raise
+    except ValueError as exc:
+        raise FieldProblem("lagrangian", str(exc)) from None
 
 
 @router.post("/v1/hamiltonize", operation_id="symbolic-hamiltonize", response_model=HamiltonizeResult,
              response_model_exclude_unset=True, responses=_ERRORS,
              summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
-def hamiltonize(request: HamiltonizeRequest) -> dict[str, Any]:
-    names = request.coordinates + request.velocities + list(request.parameters) + request.symbols
-    symbols = _declare(names, "coordinates")
-    parsed = {field: _parse(getattr(request, field), symbols, field) for field in ("lagrangian", "a1", "a2", "b")}
-    potential = None if request.potential is None else _parse(request.potential, symbols, "potential")
-    domain, shift, multiplier = _monopole(request, symbols)
-    args = (parsed["lagrangian"], tuple(symbols[q] for q in request.coordinates),
-            tuple(symbols[v] for v in request.velocities), parsed["a1"], parsed["a2"], parsed["b"], potential,
-            {symbols[k]: v for k, v in request.parameters.items()})
-    kwargs = {"budget_s": request.budget_s, "domain": domain, "shift": shift, "multiplier_symbol": multiplier}
-    try:
-        return _isolated(_hamiltonize_json, (args, kwargs), request.budget_s)  # type: ignore[no-any-return]
-    except ValueError as exc:
-        raise invalid_request([FieldError(field="lagrangian", reason=str(exc))]) from None
+async def hamiltonize(request: HamiltonizeRequest, http: Request) -> dict[str, Any]:
+    _check_size(request, get_settings())
+    return await _run(http, _hamiltonize_in_child, request.model_dump(), request.budget_s)  # type: ignore[no-any-return]
 
 
 #: The name standing for the reducing multiplier N in ``monopole.shift``.
@@ -119,19 +202,18 @@ def _monopole(request: HamiltonizeRequest, symbols: dict[str, sp.Symbol]) -> tup
         for j, text in enumerate(pair):
             value = _parse(text, {}, f"monopole.domain[{i}][{j}]")
             if not (value.is_number and value.is_real and value.is_finite):
-                raise invalid_request([FieldError(field=f"monopole.domain[{i}][{j}]",
-                                                  reason="must be a finite real constant (numbers and pi)")])
+                raise FieldProblem(f"monopole.domain[{i}][{j}]", "must be a finite real constant (numbers and pi)")
             bounds.append(float(value))
         if not bounds[0] < bounds[1]:
-            raise invalid_request([FieldError(field=f"monopole.domain[{i}]",
-                                              reason=f"the lower bound {bounds[0]:g} must be below the upper {bounds[1]:g}")])
+            raise FieldProblem(f"monopole.domain[{i}]",
+                               f"the lower bound {bounds[0]:g} must be below the upper {bounds[1]:g}")
         domain.append((bounds[0], bounds[1]))
     if spec.shift is None:
         return tuple(domain), None, None
     if MULTIPLIER_NAME in symbols:
-        raise invalid_request([FieldError(field="monopole.shift", reason=(
+        raise FieldProblem("monopole.shift", (
             f"'{MULTIPLIER_NAME}' stands for the reducing multiplier in the shift; rename the declared name "
-            f"'{MULTIPLIER_NAME}'"))])
+            f"'{MULTIPLIER_NAME}'"))
     N = sp.Symbol(MULTIPLIER_NAME, real=True)
     allowed = {name: symbols[name] for name in request.coordinates + list(request.parameters) + request.symbols}
     shift = tuple(_parse(text, {**allowed, MULTIPLIER_NAME: N}, f"monopole.shift[{k}]") for k, text in enumerate(spec.shift))

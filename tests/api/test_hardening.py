@@ -110,3 +110,51 @@ def test_a_huge_constant_in_a_bracket_is_a_422_not_an_overflow(client):
 def test_bodies_json_cannot_read_are_a_422_naming_the_body(client, body):
     r = client.post("/v1/jobs", content=body, headers={"content-type": "application/json"})
     assert r.status_code == 422 and _fields(r) == ["body"] and r.json()["type"] == "/problems/invalid-request"
+
+
+SO3 = {"variables": ["x", "y", "z"], "matrix": [["0", "z", "-y"], ["-z", "0", "x"], ["y", "-x", "0"]]}
+
+
+def test_many_long_casimirs_are_refused_before_any_parsing(client):
+    """The issue's case: 120 candidates of 2,000 characters with budget_s 1 took 93 s of API CPU. Now the
+    request is refused by its size (40,000 characters at most) in well under a second."""
+    import time
+
+    long = "+".join(f"x**2*y**{k % 5 + 1}*z" for k in range(200))[:1999].rstrip("+*")
+    body = {**SO3, "casimirs": {f"c{i}": long for i in range(120)}, "budget_s": 1}
+    start = time.perf_counter()
+    r = client.post("/v1/brackets/verify", json=body)
+    assert time.perf_counter() - start < 1.0
+    assert r.status_code == 422 and _fields(r) == ["casimirs"], r.text
+    matrix_characters = sum(len(e) for row in SO3["matrix"] for e in row)
+    assert f"{120 * len(long) + matrix_characters} characters of expressions in one request; at most 40000" \
+        in r.json()["detail"]
+
+
+def test_too_many_expressions_are_refused_naming_the_count(client):
+    body = {**SO3, "casimirs": {f"c{i}": "x**2 + y**2 + z**2" for i in range(192)}}  # 9 + 192 = 201 expressions
+    r = client.post("/v1/brackets/verify", json=body)
+    assert r.status_code == 422 and _fields(r) == ["casimirs"], r.text
+    assert "201 expressions in one request; at most 200" in r.json()["detail"]
+    body["casimirs"].pop("c0")  # 200: accepted and checked
+    r = client.post("/v1/brackets/verify", json=body)
+    assert r.status_code == 200 and len(r.json()["casimirs"]) == 191 and all(c["passed"] for c in r.json()["casimirs"])
+
+
+def test_hamiltonize_counts_its_characters_too(client, monkeypatch):
+    from schemas.settings import get_settings
+
+    monkeypatch.setenv("NONHOLONOMIC_MAX_SYMBOLIC_CHARACTERS", "50")
+    get_settings.cache_clear()
+    body = {"lagrangian": "(q1dot**2 + q2dot**2)/2 + " + "+".join(["q1*q2"] * 10), "coordinates": ["q1", "q2"],
+            "velocities": ["q1dot", "q2dot"], "a1": "0", "a2": "0", "b": "0"}
+    r = client.post("/v1/hamiltonize", json=body)
+    assert r.status_code == 422 and _fields(r) == ["body"] and "at most 50" in r.json()["detail"], r.text
+
+
+def test_parsing_counts_against_the_budget(client):
+    """Reading the expressions is symbolic work too: a budget spent before the last is read is a 422
+    naming budget_s and where it stopped (not a 200 after minutes of parsing)."""
+    r = client.post("/v1/brackets/verify", json={**SO3, "budget_s": 1e-6})
+    assert r.status_code == 422 and _fields(r) == ["budget_s"], r.text
+    assert "stopped at matrix[0][0]" in r.json()["detail"]

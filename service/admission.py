@@ -1,0 +1,74 @@
+"""Admission control for the symbolic endpoints: a bounded pool with a bounded wait queue.
+
+A symbolic request occupies one of ``symbolic_workers`` slots while its child process runs
+(:mod:`service.isolated`); up to ``symbolic_queue`` more wait for a slot. A request beyond both is
+refused at once with a 503 problem and ``Retry-After`` (the expected wait), instead of taking a
+request thread until it times out: the API's threads, and ``/health``, stay free under any load.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from schemas.problems import OVERLOADED
+from service.errors import ProblemError
+
+#: Seconds assumed for a request before any has finished (for ``Retry-After``).
+_FIRST_GUESS_S = 5.0
+#: Weight of the newest request in the running mean of durations.
+_SMOOTHING = 0.2
+
+
+class SymbolicPool:
+    """At most ``size`` requests run at once, at most ``queue`` wait; the rest get a 503.
+
+    Used from the event loop only (no lock needed): ``async with pool.slot(): ...``.
+    """
+
+    def __init__(self, size: int, queue: int) -> None:
+        self.size, self.queue = size, queue
+        self._slots = asyncio.Semaphore(size)
+        self.running = 0
+        self.waiting = 0
+        self.refused = 0
+        self._mean_s = _FIRST_GUESS_S
+
+    def retry_after_s(self) -> int:
+        """Seconds until a slot is likely free for a new request: the queue ahead of it drained at the
+        pool's rate (the running mean of durations), at least 1."""
+        ahead = self.waiting + 1
+        return max(1, math.ceil(self._mean_s * ahead / self.size))
+
+    @asynccontextmanager
+    async def slot(self) -> AsyncIterator[None]:
+        """Hold one slot for the body; wait for it if the queue has room, else raise a 503 problem."""
+        if self.running >= self.size and self.waiting >= self.queue:
+            self.refused += 1
+            retry = self.retry_after_s()
+            raise ProblemError(
+                503, "Symbolic pool busy",
+                f"{self.running} symbolic requests are running and {self.waiting} are waiting (the pool's bounds: "
+                f"symbolic_workers={self.size}, symbolic_queue={self.queue}); retry after {retry} s",
+                OVERLOADED, headers={"Retry-After": str(retry)})
+        self.waiting += 1
+        try:
+            await self._slots.acquire()
+        finally:
+            self.waiting -= 1
+        self.running += 1
+        start = time.monotonic()
+        try:
+            yield
+        finally:
+            self.running -= 1
+            self._slots.release()
+            self._mean_s += _SMOOTHING * (time.monotonic() - start - self._mean_s)
+
+    def status(self) -> dict[str, int]:
+        """Occupancy, for ``/health``."""
+        return {"size": self.size, "queue": self.queue, "running": self.running, "waiting": self.waiting,
+                "refused": self.refused}
