@@ -10,6 +10,39 @@ def test_health_in_embedded_mode(client):
     assert body["status"] == "ok" and body["mode"] == "embedded" and body["api"] == "ok"
 
 
+def test_embedded_health_is_503_until_the_warm_up_ends(monkeypatch):
+    """A job sent during the warm-up waits for it: /health says so (503, degraded, detail) and turns 200
+    when it ends."""
+    import threading
+
+    from fastapi.testclient import TestClient
+
+    import service.backends.embedded as embedded
+    from schemas.settings import get_settings
+    from service.main import create_app
+
+    release = threading.Event()
+    monkeypatch.setattr(embedded, "warm_up", lambda: release.wait(30))
+    monkeypatch.delenv("REDIS_URL", raising=False)
+    monkeypatch.setenv("NONHOLONOMIC_WARM_UP", "true")
+    get_settings.cache_clear()
+    try:
+        with TestClient(create_app()) as client:
+            r = client.get("/health")
+            assert r.status_code == 503 and r.json()["status"] == "degraded"
+            assert r.json()["workers"]["warm"] is False and "warm-up" in r.json()["detail"]
+            release.set()
+            for _ in range(100):
+                if client.get("/health").status_code == 200:
+                    break
+                threading.Event().wait(0.02)
+            r = client.get("/health")
+            assert r.status_code == 200 and r.json()["workers"]["warm"] is True and "detail" not in r.json()
+    finally:
+        release.set()
+        get_settings.cache_clear()
+
+
 def test_catalog_describes_the_ball(client):
     systems = client.get("/v1/systems").json()["systems"]
     ball = next(s for s in systems if s["kind"] == "chaplygin_ball")

@@ -56,8 +56,11 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, s
     api = start_api(port, logs / "api.log", {"REDIS_URL": TEST_REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS})
     base = f"http://127.0.0.1:{port}"
     try:
+        wait_until(lambda: httpx.get(f"{base}/health", timeout=5).status_code in (200, 503), 60, "the API")
+        first = httpx.get(f"{base}/health", timeout=5)
         wait_healthy(base, timeout=180)
         with httpx.Client(base_url=base, timeout=10) as client:
+            client.first_health = first  # type: ignore[attr-defined]
             yield client, store, queue
     except Exception:
         print(_dump_logs(logs))
@@ -73,6 +76,28 @@ def test_health_reports_broker_and_worker(queue_stack):
     health = client.get("/health").json()
     assert health["status"] == "ok" and health["mode"] == "queue" and health["broker"] == "ok"
     assert any(health["queue"] in w["queues"] and w["warm_processes"] >= 1 for w in health["workers"].values())
+
+
+def test_health_is_503_until_a_worker_process_is_warm(queue_stack):
+    """The issue's case: /health said 200 while the worker still compiled for 17 s. The worker compiles
+    for several seconds after the API is up: meanwhile /health is 503 saying why."""
+    client, _, _ = queue_stack
+    first = client.first_health
+    assert first.status_code == 503 and first.json()["status"] == "degraded", first.text
+    assert "warm-up" in first.json()["detail"] or "no worker consumes" in first.json()["detail"]
+
+
+def test_health_reads_the_heartbeats_and_names_no_host(queue_stack):
+    from workers.heartbeat import PREFIX
+
+    client, store, queue = queue_stack
+    store.set(f"{PREFIX}worker:elsewhere:1", '{"name": "cold@elsewhere", "queues": ["%s"]}' % queue, ex=5)
+    health = client.get("/health").json()
+    assert health["workers"]["cold@elsewhere"] == {"queues": [queue], "warm_processes": 0}
+    warm = [w for name, w in health["workers"].items() if name != "cold@elsewhere"]
+    assert health["status"] == "ok" and sum(w["warm_processes"] for w in warm) == 1  # concurrency 1
+    store.delete(f"{PREFIX}worker:elsewhere:1")
+    assert "127.0.0.1" not in client.get("/health").text and "redis://" not in client.get("/health").text
 
 
 def test_job_runs_on_the_worker_and_matches_an_independent_reference(queue_stack):
