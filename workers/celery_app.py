@@ -7,10 +7,19 @@ Start a worker with::
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Any
 
 from celery import Celery
-from celery.signals import worker_process_init, worker_process_shutdown, worker_ready, worker_shutdown
+from celery.signals import (
+    task_postrun,
+    task_received,
+    task_revoked,
+    worker_process_init,
+    worker_process_shutdown,
+    worker_ready,
+    worker_shutdown,
+)
 
 from schemas.settings import get_settings
 
@@ -42,7 +51,9 @@ def make_app() -> Celery:
         task_time_limit=settings.job_time_limit_s,
         broker_transport_options={"visibility_timeout": settings.visibility_timeout_s},
         result_expires=settings.job_ttl_s,
-        task_track_started=True,
+        # STARTED is written by the task itself, after it checked that its job is not finished already
+        # (a redelivered task of a finished job must not show it running again): workers.tasks
+        task_track_started=False,
         task_default_queue=settings.queue,
         broker_connection_retry_on_startup=True,
         # The warm-up compiles every integrator in each child before it takes jobs.
@@ -55,6 +66,15 @@ app = make_app()
 
 
 _heartbeats: list[Any] = []
+_sweepers: list[Any] = []
+
+
+@lru_cache(maxsize=1)
+def _redis() -> Any:
+    """The broker's Redis, for heartbeats and held tasks (redis-py reconnects after a fork)."""
+    import redis
+
+    return redis.Redis.from_url(get_settings().redis_url or DEFAULT_REDIS_URL, socket_timeout=5)
 
 
 def _beat(key: str, value: str) -> None:
@@ -84,8 +104,11 @@ def _announce(sender: Any = None, **_: Any) -> None:
 
     from workers.heartbeat import process_key, worker_key
 
+    from workers.redelivery import Sweeper
+
     queues = sorted(q.name for q in sender.task_consumer.queues)
     _beat(worker_key(), json.dumps({"name": sender.hostname, "queues": queues}))
+    _sweepers.append(Sweeper(_redis(), _send_again).start())
     if "prefork" not in type(sender.pool).__module__:  # solo or threads: jobs run in this process
         if get_settings().warm_up:
             from workers.jobs import warm_up
@@ -94,8 +117,53 @@ def _announce(sender: Any = None, **_: Any) -> None:
         _beat(process_key(os.getpid()), "warm")
 
 
+def _send_again(name: str, args: Any, kwargs: Any, task_id: str, queue: str) -> None:
+    app.send_task(name, args=args, kwargs=kwargs, task_id=task_id, queue=queue)
+
+
+@task_received.connect
+def _hold(request: Any = None, **_: Any) -> None:
+    """Note the received task under this worker's heartbeat (:mod:`workers.redelivery`)."""
+    from workers.heartbeat import worker_key
+    from workers.redelivery import record_received
+
+    settings = get_settings()
+    queue = (request.delivery_info or {}).get("routing_key") or settings.queue
+    record_received(_redis(), worker_key(), request.id, request.name, request.args, request.kwargs, queue,
+                    int(settings.visibility_timeout_s))
+
+
+@task_postrun.connect
+def _release(task_id: str | None = None, **_: Any) -> None:
+    from workers.redelivery import record_ended
+
+    if task_id:
+        record_ended(_redis(), task_id)
+
+
+@task_revoked.connect
+def _release_revoked(request: Any = None, **_: Any) -> None:
+    from workers.redelivery import record_ended
+
+    if request is not None:
+        record_ended(_redis(), request.id)
+
+
 @worker_process_shutdown.connect
+def _silence_process(**_: Any) -> None:
+    while _heartbeats:
+        _heartbeats.pop().stop()
+
+
 @worker_shutdown.connect
 def _silence(**_: Any) -> None:
+    """A worker that stops (warm shutdown: its running tasks ended) gives back what it still held: the
+    broker restores those messages, so they must not also be sent again."""
+    from workers.heartbeat import worker_key
+    from workers.redelivery import release_owned
+
+    while _sweepers:
+        _sweepers.pop().stop()
+    release_owned(_redis(), worker_key())
     while _heartbeats:
         _heartbeats.pop().stop()

@@ -115,6 +115,11 @@ class RedisJobRegistry:
             pipe.exists(self.key(job_id))
         return [bool(n) for n in pipe.execute()]
 
+    def finished(self, job_id: str) -> bool:
+        """Whether a worker recorded the job's end (succeeded or failed)."""
+        status = self.client.hget(self.key(job_id), "status")
+        return status is not None and status.decode() in RECORDED_STATUSES
+
     def cancel(self, job_id: str) -> None:
         self._set_if_exists(keys=[self.key(job_id)], args=["cancelled", "1"])
 

@@ -72,9 +72,12 @@ def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
     request, refused = request_from_args(args, kwargs)
     registry = _registry()
     registry.ensure(job_id, request)
+    if registry.finished(job_id):  # a redelivered message of a finished job (workers.redelivery)
+        raise Ignore()
     if registry.is_cancelled(job_id):
         self.update_state(state=states.REVOKED)
         raise Ignore()
+    self.update_state(state=states.STARTED)
     if refused is not None:
         raise InvalidJob(refused)
     try:

@@ -1,0 +1,181 @@
+"""Fault recovery with real workers: a worker killed whole (every process SIGKILLed), a pool process
+killed, a worker stopped with SIGTERM, a job past its time limit, a running job cancelled.
+
+Needs Redis on 127.0.0.1:6379 (the README's test command starts one); uses DB 15 and queues of its own.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+import redis
+from celery import Celery
+
+from tests.support import (
+    TEST_REDIS_URL,
+    free_port,
+    poll_job,
+    redis_available,
+    start_api,
+    start_worker,
+    stop,
+    wait_healthy,
+    wait_until,
+)
+
+pytestmark = pytest.mark.integration
+
+BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7,
+                   "potential": {"kind": "brun", "k": 0.4}},
+        "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 11}
+#: About 8 s of integration on one core: long enough to kill or stop its worker mid-run.
+LONG = {**BODY, "t_final": 3e6}
+LIMITS = {"NONHOLONOMIC_MAX_T_FINAL": "1e9"}
+#: The issue's bound: a job whose worker died whole completes within this long of a live worker.
+REDELIVERY_BOUND_S = 60.0
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        found += [int(p) for p in (task / "children").read_text().split()]
+    return found
+
+
+class Stack:
+    """The API on a queue of its own, and the workers started on that queue."""
+
+    def __init__(self, base: str, queue: str, logs: Path) -> None:
+        self.base, self.queue, self.logs = base, queue, logs
+        self.client = httpx.Client(base_url=base, timeout=10)
+        self.workers: list[subprocess.Popen] = []
+
+    def start_worker(self, **env: str) -> subprocess.Popen:
+        log = self.logs / f"worker-{len(self.workers)}.log"
+        worker = start_worker(TEST_REDIS_URL, self.queue, log, extra_env={**LIMITS, **env})
+        self.workers.append(worker)
+        return worker
+
+    def wait_running(self, location: str, progress: float = 0.05) -> None:
+        wait_until(lambda: self.client.get(location).json()["progress"] >= progress, 120, "the job to run")
+
+    def logs_text(self) -> str:
+        return "\n".join(f"--- {p.name}\n{p.read_text()[-3000:]}" for p in sorted(self.logs.glob("*.log")))
+
+
+#: Time limits of the time-limit test. Celery puts the sender's limits in each message, so the API
+#: must have them too (as in docker-compose, where both read the same environment).
+SHORT_LIMITS = {"NONHOLONOMIC_JOB_SOFT_TIME_LIMIT_S": "2", "NONHOLONOMIC_JOB_TIME_LIMIT_S": "4"}
+
+
+@pytest.fixture()
+def stack(request, tmp_path) -> Iterator[Stack]:
+    if not redis_available():
+        pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
+    queue = f"faults-{uuid.uuid4().hex[:8]}"
+    port = free_port()
+    env = SHORT_LIMITS if "time_limit" in request.node.name else {}
+    api = start_api(port, tmp_path / "api.log", {"REDIS_URL": TEST_REDIS_URL, "NONHOLONOMIC_QUEUE": queue,
+                                                 **LIMITS, **env})
+    s = Stack(f"http://127.0.0.1:{port}", queue, tmp_path)
+    try:
+        yield s
+    except Exception:
+        print(s.logs_text())
+        raise
+    finally:
+        for worker in s.workers:
+            stop(worker)
+        stop(api)
+        s.client.close()
+
+
+def test_a_job_whose_worker_died_whole_completes_on_the_next_worker_within_60_s(stack):
+    first = stack.start_worker()
+    wait_healthy(stack.base, timeout=180)
+    location = stack.client.post("/v1/jobs", json=LONG).headers["location"]
+    stack.wait_running(location)
+    for pid in _children(first.pid) + [first.pid]:  # every process of the worker, at once
+        os.kill(pid, signal.SIGKILL)
+    first.wait(10)
+    assert stack.client.get(location).json()["status"] == "running"  # as Celery last heard of it
+
+    stack.start_worker()
+    wait_healthy(stack.base, timeout=180)
+    live = time.monotonic()
+    view = poll_job(stack.client, location, timeout=REDELIVERY_BOUND_S)
+    took = time.monotonic() - live
+    assert view["status"] == "succeeded", (view["error"], stack.logs_text())
+    assert took < REDELIVERY_BOUND_S
+    assert "redelivered nonholonomic.simulate" in stack.logs_text()
+    # the rerun is the computation an undisturbed worker does: the same numbers, bit for bit
+    fresh = poll_job(stack.client, stack.client.post("/v1/jobs", json=LONG).headers["location"], timeout=60)
+    assert view["result"]["final_state"] == fresh["result"]["final_state"]
+    assert view["result"]["integrals"] == fresh["result"]["integrals"]
+
+    # The dead worker's message comes back from Redis after the visibility timeout: sent again here,
+    # it ends without running and the job stays as it was.
+    queue = Celery(broker=TEST_REDIS_URL, backend=TEST_REDIS_URL)
+    queue.send_task("nonholonomic.simulate", args=[LONG], task_id=location.rsplit("/", 1)[1], queue=stack.queue)
+    time.sleep(3)
+    again = stack.client.get(location).json()
+    assert again["status"] == "succeeded" and again["result"] == view["result"]
+
+
+def test_a_killed_pool_process_is_replaced_and_its_job_completes(stack):
+    worker = stack.start_worker()
+    wait_healthy(stack.base, timeout=180)
+    location = stack.client.post("/v1/jobs", json=LONG).headers["location"]
+    stack.wait_running(location)
+    (child,) = _children(worker.pid)
+    os.kill(child, signal.SIGKILL)
+    view = poll_job(stack.client, location, timeout=120)  # requeued by the main process at once
+    assert view["status"] == "succeeded", view["error"]
+    assert worker.poll() is None
+
+
+def test_sigterm_lets_the_running_job_finish_before_the_worker_exits(stack):
+    worker = stack.start_worker()
+    wait_healthy(stack.base, timeout=180)
+    location = stack.client.post("/v1/jobs", json=LONG).headers["location"]
+    stack.wait_running(location)
+    worker.send_signal(signal.SIGTERM)  # warm shutdown
+    assert worker.wait(120) == 0
+    view = stack.client.get(location).json()
+    assert view["status"] == "succeeded", view["error"]
+    held = redis.Redis.from_url(TEST_REDIS_URL).keys("nonholonomic:inflight:*")
+    assert not [k for k in held if location.rsplit("/", 1)[1].encode() in k]
+
+
+def test_a_job_past_its_time_limit_fails_clearly_and_the_worker_stays_healthy(stack):
+    stack.start_worker(**SHORT_LIMITS)
+    wait_healthy(stack.base, timeout=180)
+    location = stack.client.post("/v1/jobs", json=LONG).headers["location"]
+    view = poll_job(stack.client, location, timeout=60)
+    assert view["status"] == "failed"
+    assert view["error"] == {"type": "JobTimeout", "message": "the job exceeded its time limit of 2 s"}
+    short = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=60)
+    assert short["status"] == "succeeded"
+
+
+def test_cancelling_a_running_job_stops_it_and_frees_the_worker(stack):
+    stack.start_worker()
+    wait_healthy(stack.base, timeout=180)
+    location = stack.client.post("/v1/jobs", json={**LONG, "t_final": 1e8}).headers["location"]
+    stack.wait_running(location, progress=0.001)
+    start = time.monotonic()
+    assert stack.client.delete(location).status_code == 202
+    wait_until(lambda: stack.client.get(location).json()["status"] == "cancelled", 5, "cancelled")
+    short = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=60)
+    assert short["status"] == "succeeded" and time.monotonic() - start < 30
+    final = np.array(short["result"]["final_state"]["M"])
+    assert np.all(np.isfinite(final))
