@@ -53,6 +53,9 @@ class Client:
         the client is made), else ``http://127.0.0.1:8000``.
     timeout : float, default 30.0
         Seconds allowed for each HTTP request (not for a job: see :meth:`wait`).
+    api_key : str, optional
+        The API key, sent as ``Authorization: Bearer <key>``, for a service with keys on; default
+        ``NONHOLONOMIC_API_KEY`` if set.
     transport : httpx.BaseTransport, optional
         A custom transport (``httpx.MockTransport`` in tests).
 
@@ -62,12 +65,15 @@ class Client:
     that cannot reach the service raises :class:`ApiError` with ``status`` 0.
     """
 
-    def __init__(self, base_url: str | None = None, timeout: float = 30.0, *,
+    def __init__(self, base_url: str | None = None, timeout: float = 30.0, *, api_key: str | None = None,
                  transport: httpx.BaseTransport | None = None) -> None:
         self.base_url: str = (base_url or default_url()).rstrip("/")
         self.timeout = timeout
-        self._http = httpx.Client(base_url=self.base_url, timeout=timeout, transport=transport,
-                                  headers={"accept": "application/json, application/problem+json;q=0.9, */*;q=0.1"})
+        headers = {"accept": "application/json, application/problem+json;q=0.9, */*;q=0.1"}
+        key = api_key or os.environ.get("NONHOLONOMIC_API_KEY")
+        if key:
+            headers["authorization"] = f"Bearer {key}"
+        self._http = httpx.Client(base_url=self.base_url, timeout=timeout, transport=transport, headers=headers)
 
     # -- plumbing ---------------------------------------------------------------------------
 

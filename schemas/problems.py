@@ -12,6 +12,9 @@ CONFLICT = "/problems/conflict"
 UNAVAILABLE = "/problems/unavailable"
 TIMEOUT = "/problems/timeout"
 OVERLOADED = "/problems/overloaded"
+UNAUTHORIZED = "/problems/unauthorized"
+RATE_LIMITED = "/problems/rate-limited"
+QUEUE_FULL = "/problems/queue-full"
 INTERNAL = "/problems/internal-error"
 
 

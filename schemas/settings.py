@@ -37,6 +37,14 @@ class Settings(BaseSettings):
     max_symbolic_expressions: int = Field(200, ge=1, description="most expressions in one symbolic request")
     max_symbolic_characters: int = Field(40_000, ge=1,
                                          description="most characters of expressions in one symbolic request")
+    api_keys: str | None = Field(None, description="comma-separated API keys ('name:key' or 'key'); unset: no keys")
+    api_keys_file: str | None = Field(None, description="a file of API keys, one per line ('name:key' or 'key')")
+    rate_limit_per_minute: int = Field(0, ge=0, description="requests per minute per API key (0: no limit)")
+    max_active_jobs_per_key: int = Field(1000, ge=1,
+                                         description="queued and running jobs one key may have; beyond: 429")
+    max_queued_messages: int = Field(10_000, ge=1,
+                                     description="jobs and ensemble chunks waiting in the queue; beyond: 429")
+    cors_origins: str = Field("", description="comma-separated origins allowed by CORS ('' : none, '*': any)")
     warm_up: bool = Field(True, description="compile the integrators when a worker (or embedded API) starts")
 
     @property

@@ -1,4 +1,4 @@
-"""Admission control for the symbolic endpoints: a bounded pool with a bounded wait queue.
+"""Admission control: a bounded pool for the symbolic endpoints, bounds on queued work for the others.
 
 A symbolic request occupies one of ``symbolic_workers`` slots while its child process runs
 (:mod:`service.isolated`); up to ``symbolic_queue`` more wait for a slot. A request beyond both is
@@ -14,7 +14,10 @@ import time
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-from schemas.problems import OVERLOADED
+from fastapi import Request
+
+from schemas.problems import OVERLOADED, QUEUE_FULL
+from schemas.settings import Settings
 from service.errors import ProblemError
 
 #: Seconds assumed for a request before any has finished (for ``Retry-After``).
@@ -72,3 +75,24 @@ class SymbolicPool:
         """Occupancy, for ``/health``."""
         return {"size": self.size, "queue": self.queue, "running": self.running, "waiting": self.waiting,
                 "refused": self.refused}
+
+
+#: Seconds a client is told to wait when its key has too many active jobs or the queue is full.
+QUEUE_FULL_RETRY_S = 10
+
+
+def admit_work(request: Request, settings: Settings) -> None:
+    """Refuse new work (429 with ``Retry-After``) beyond the caller's key's bound on queued and running
+    jobs, or beyond the bound on messages waiting in the queue."""
+    backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
+    if owner is not None:
+        active = backend.active_jobs(owner, settings.max_active_jobs_per_key)
+        if active >= settings.max_active_jobs_per_key:
+            raise ProblemError(429, "Too many jobs", f"this key has {active} queued or running jobs, the most it may "
+                               f"have (max_active_jobs_per_key={settings.max_active_jobs_per_key}); retry when some "
+                               "have finished", QUEUE_FULL, headers={"Retry-After": str(QUEUE_FULL_RETRY_S)})
+    waiting = backend.queued_messages()
+    if waiting >= settings.max_queued_messages:
+        raise ProblemError(429, "Queue full", f"{waiting} jobs and ensemble chunks wait in the queue, the most it "
+                           f"holds (max_queued_messages={settings.max_queued_messages}); retry later", QUEUE_FULL,
+                           headers={"Retry-After": str(QUEUE_FULL_RETRY_S)})

@@ -8,14 +8,17 @@ from __future__ import annotations
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
-from fastapi import FastAPI
+from fastapi import Depends, FastAPI
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi_offline import FastAPIOffline
 
 import nonholonomic
 from schemas.settings import Settings, get_settings
+from service.access import Access, caller
 from service.admission import SymbolicPool
 from service.backends import make_backend
-from service.errors import install_error_handlers
+from service.errors import install_error_handlers, problem_responses
+from service.idempotency import idempotency_store
 from service.isolated import start_fork_server
 from service.limits import BodyLimit
 from service.routes import ensembles, health, jobs, maps, pages, report, symbolic, systems
@@ -23,13 +26,14 @@ from service.routes import ensembles, health, jobs, maps, pages, report, symboli
 
 def create_app(settings: Settings | None = None) -> FastAPI:
     """Build the app; the job backend is created at startup from ``settings``."""
+    chosen = settings or get_settings()
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        chosen = settings or get_settings()
         start_fork_server()  # for the symbolic requests' child processes
         app.state.symbolic_pool = SymbolicPool(chosen.symbolic_workers, chosen.symbolic_queue)
         app.state.backend = make_backend(chosen)
+        app.state.idempotency = idempotency_store(app.state.backend, chosen.job_ttl_s)
         try:
             yield
         finally:
@@ -43,15 +47,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     install_error_handlers(app)
-    app.add_middleware(BodyLimit, limit=(settings or get_settings()).max_body_bytes)
+    app.state.settings = chosen
+    app.state.access = Access(chosen)
+    app.add_middleware(BodyLimit, limit=chosen.max_body_bytes)
+    origins = [o.strip() for o in chosen.cors_origins.split(",") if o.strip()]
+    if origins:
+        app.add_middleware(CORSMiddleware, allow_origins=origins, allow_methods=["GET", "POST", "DELETE"],
+                           allow_headers=["Authorization", "X-API-Key", "Content-Type", "Idempotency-Key"],
+                           expose_headers=["Location", "Retry-After", "Link", "Idempotent-Replayed"])
     app.include_router(health.router)
-    app.include_router(systems.router)
-    app.include_router(jobs.router)
-    app.include_router(ensembles.router)
-    app.include_router(symbolic.router)
-    app.include_router(maps.router)
-    app.include_router(report.router)
-    app.include_router(pages.router)
+    # every /v1 route: the caller's key (when keys are configured) and its rate
+    keyed = {"dependencies": [Depends(caller)],
+             "responses": problem_responses({401: "API keys are on and none, or an unknown one, was sent",
+                                             429: "the key's rate limit; `Retry-After` says when to retry"})}
+    for router in (systems.router, jobs.router, ensembles.router, symbolic.router, maps.router, report.router,
+                   pages.router):
+        app.include_router(router, **keyed)  # type: ignore[arg-type]
     return app
 
 

@@ -30,7 +30,8 @@ PROGRESS_INTERVAL_S = 0.2
 class EnsembleStore(Protocol):
     """Where an ensemble's parent record, progress and member results live."""
 
-    def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]]) -> str: ...
+    def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]],
+               owner: str | None = None) -> str: ...
     def record(self, ensemble_id: str) -> dict[str, Any] | None: ...
     def spec(self, ensemble_id: str) -> tuple[dict[str, Any], list[tuple[int, int]]] | None: ...
     def is_cancelled(self, ensemble_id: str) -> bool: ...
@@ -54,10 +55,12 @@ class MemoryEnsembleStore:
         self._lock = threading.Lock()
         self._records: dict[str, dict[str, Any]] = {}
 
-    def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]]) -> str:
+    def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]],
+               owner: str | None = None) -> str:
         created_at = _now()
         with self._lock:
             self._records[ensemble_id] = {"request": request, "created_at": created_at, "chunks": chunks,
+                                          "owner": owner,
                                           "cancelled": False, "done": set(), "progress": {}, "digests": {},
                                           "workers": {}, "members": {}, "starts": {}}
         return created_at
@@ -68,7 +71,7 @@ class MemoryEnsembleStore:
             if r is None:
                 return None
             return {"request": r["request"], "created_at": r["created_at"], "chunks": r["chunks"],
-                    "cancelled": r["cancelled"], "done": set(r["done"]), "progress": dict(r["progress"]),
+                    "owner": r["owner"], "cancelled": r["cancelled"], "done": set(r["done"]), "progress": dict(r["progress"]),
                     "digests": dict(r["digests"]), "workers": dict(r["workers"]), "starts": dict(r["starts"])}
 
     def spec(self, ensemble_id: str) -> tuple[dict[str, Any], list[tuple[int, int]]] | None:
@@ -117,11 +120,13 @@ class RedisEnsembleStore:
     def key(ensemble_id: str, part: str = "") -> str:
         return KEY_PREFIX + ensemble_id + (f":{part}" if part else "")
 
-    def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]]) -> str:
+    def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]],
+               owner: str | None = None) -> str:
         created_at = _now()
         pipe = self.client.pipeline()
         pipe.hset(self.key(ensemble_id), mapping={"request": json.dumps(request), "created_at": created_at,
-                                                  "chunks": json.dumps(chunks), "cancelled": "0"})
+                                                  "chunks": json.dumps(chunks), "cancelled": "0",
+                                                  **({"owner": owner} if owner else {})})
         pipe.expire(self.key(ensemble_id), self.ttl_s)
         pipe.execute()
         return created_at
@@ -140,7 +145,7 @@ class RedisEnsembleStore:
         fields = {k.decode(): v.decode() for k, v in raw.items()}
         return {"request": json.loads(fields["request"]), "created_at": fields["created_at"],
                 "chunks": [tuple(c) for c in json.loads(fields["chunks"])],
-                "cancelled": fields.get("cancelled") == "1",
+                "owner": fields.get("owner"), "cancelled": fields.get("cancelled") == "1",
                 "done": {int(c) for c in done},
                 "progress": {int(k): int(v) for k, v in progress.items()},
                 "digests": {int(k): json.loads(v) for k, v in digests.items()},

@@ -30,6 +30,8 @@ import redis
 KEY_PREFIX = "nonholonomic:job:"
 #: Sorted set of every job id, scored by creation time (epoch seconds).
 INDEX_KEY = "nonholonomic:jobs"
+#: Sorted sets of each key owner's jobs (``nonholonomic:active:{owner}``), pruned of finished ones when counted.
+ACTIVE_PREFIX = "nonholonomic:active:"
 #: The Celery task name of a simulation job (what job-queue clients ``send_task``).
 SIMULATE_TASK = "nonholonomic.simulate"
 #: Terminal statuses a worker writes into the record (``cancelled`` is the ``cancelled`` flag).
@@ -68,14 +70,17 @@ class RedisJobRegistry:
     def key(job_id: str) -> str:
         return KEY_PREFIX + job_id
 
-    def create(self, job_id: str, request: dict[str, Any]) -> str:
-        """Record a job (overwriting any record of that id); returns its ``created_at``."""
+    def create(self, job_id: str, request: dict[str, Any], owner: str | None = None) -> str:
+        """Record a job (overwriting any record of that id) of ``owner``'s key; returns its ``created_at``."""
         now = _now()
         pipe = self.client.pipeline()
         pipe.hset(self.key(job_id), mapping={"request": json.dumps(request), "created_at": now.isoformat(),
-                                             "cancelled": "0"})
+                                             "cancelled": "0", **({"owner": owner} if owner else {})})
         pipe.expire(self.key(job_id), self.ttl_s)
         pipe.zadd(INDEX_KEY, {job_id: now.timestamp()})
+        if owner:
+            pipe.zadd(ACTIVE_PREFIX + owner, {job_id: now.timestamp()})
+            pipe.expire(ACTIVE_PREFIX + owner, self.ttl_s)
         pipe.zremrangebyscore(INDEX_KEY, "-inf", f"({now.timestamp() - self.ttl_s!r}")  # their hashes expired
         pipe.execute()
         return now.isoformat()
@@ -89,14 +94,15 @@ class RedisJobRegistry:
 
     @staticmethod
     def _entry(request: bytes | None, created_at: bytes | None, cancelled: bytes | None,
-               status: bytes | None) -> dict[str, Any] | None:
+               status: bytes | None, owner: bytes | None) -> dict[str, Any] | None:
         if request is None or created_at is None:
             return None
         recorded = status.decode() if status is not None else None
         return {"request": json.loads(request), "created_at": created_at.decode(), "cancelled": cancelled == b"1",
-                "status": recorded if recorded in RECORDED_STATUSES else None}
+                "status": recorded if recorded in RECORDED_STATUSES else None,
+                "owner": owner.decode() if owner is not None else None}
 
-    _FIELDS = ("request", "created_at", "cancelled", "status")
+    _FIELDS = ("request", "created_at", "cancelled", "status", "owner")
 
     def get(self, job_id: str) -> dict[str, Any] | None:
         """``{request, created_at, cancelled, status}`` (status: what the worker recorded, or None)."""
@@ -114,6 +120,24 @@ class RedisJobRegistry:
         for job_id in job_ids:
             pipe.exists(self.key(job_id))
         return [bool(n) for n in pipe.execute()]
+
+    def active_count(self, owner: str, enough: int) -> int:
+        """Queued and running jobs of ``owner``: the size of its set of jobs, pruned of finished ones when
+        it holds ``enough`` (so exact from there, an overestimate below)."""
+        key = ACTIVE_PREFIX + owner
+        self.client.zremrangebyscore(key, "-inf", f"({_now().timestamp() - self.ttl_s!r}")
+        count = int(self.client.zcard(key))
+        if count < enough:
+            return count
+        ids = [m.decode() for m in self.client.zrange(key, 0, -1)]
+        pipe = self.client.pipeline(transaction=False)
+        for job_id in ids:
+            pipe.hmget(self.key(job_id), "status", "cancelled")
+        ended = [job_id for job_id, (status, cancelled) in zip(ids, pipe.execute())
+                 if status is not None or cancelled == b"1"]  # a status is recorded at the end only
+        if ended:
+            self.client.zrem(key, *ended)
+        return count - len(ended)
 
     def finished(self, job_id: str) -> bool:
         """Whether a worker recorded the job's end (succeeded or failed)."""

@@ -24,6 +24,8 @@ class JobRecord:
     result: dict[str, Any] | None = None
     error: dict[str, str] | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    #: The API key's owner that submitted it (None: keys off, or sent straight to the broker).
+    owner: str | None = None
 
 
 class InvalidCursor(ValueError):
@@ -58,8 +60,8 @@ class JobBackend(Protocol):
     #: Where ensembles' records and member results live.
     ensembles: EnsembleStore
 
-    def submit(self, request: dict[str, Any]) -> JobRecord:
-        """Accept a validated request; returns the queued job."""
+    def submit(self, request: dict[str, Any], owner: str | None = None) -> JobRecord:
+        """Accept a validated request (of ``owner``'s key); returns the queued job."""
 
     def get(self, job_id: str) -> JobRecord | None:
         """The job, or None if this service never accepted that id."""
@@ -67,8 +69,10 @@ class JobBackend(Protocol):
     def cancel(self, job_id: str) -> JobRecord | None:
         """Ask the job to stop; returns it (None if unknown)."""
 
-    def list_jobs(self, status: str | None, limit: int, cursor: str | None) -> tuple[list[JobRecord], str | None]:
-        """Jobs newest first (without results), only those with ``status`` if given, at most ``limit``,
+    def list_jobs(self, status: str | None, limit: int, cursor: str | None,
+                  owner: str | None = None) -> tuple[list[JobRecord], str | None]:
+        """Jobs newest first (without results), only those with ``status`` if given and those ``owner``
+        may see if given (:func:`service.access.visible`), at most ``limit``,
         starting after ``cursor`` (a previous page's next cursor, None for the first page).
 
         Returns the page and the cursor of the next one, None at the end. A page may be shorter than
@@ -76,11 +80,19 @@ class JobBackend(Protocol):
         status filter. Raises :class:`InvalidCursor` for a cursor it did not give out.
         """
 
-    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]]) -> tuple[str, str]:
+    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
+                        owner: str | None = None) -> tuple[str, str]:
         """Record a validated ensemble and send its chunks to the workers; returns (id, created_at)."""
 
     def cancel_ensemble(self, ensemble_id: str) -> None:
         """Stop every chunk: queued ones never start, running ones stop at their next progress report."""
+
+    def active_jobs(self, owner: str, enough: int) -> int:
+        """Queued and running jobs of ``owner``: exact when at least ``enough`` (below, it may count
+        finished jobs too, never fewer than there are)."""
+
+    def queued_messages(self) -> int:
+        """Jobs and ensemble chunks waiting to start."""
 
     def health(self) -> dict[str, Any]:
         """Status of the parts this backend depends on; ``ok`` is False if jobs cannot run."""

@@ -13,6 +13,7 @@ from typing import Any
 from nonholonomic.integration import IntegrationCancelled
 from schemas.jobs import TERMINAL_STATUSES
 from schemas.settings import Settings
+from service.access import visible
 from service.backends.base import JobRecord, decode_cursor, encode_cursor
 from workers.ensembles import MemoryEnsembleStore, run_ensemble_chunk
 from workers.jobs import run_job, warm_up
@@ -46,9 +47,9 @@ class EmbeddedBackend:
         finally:
             self._warm.set()
 
-    def submit(self, request: dict[str, Any]) -> JobRecord:
+    def submit(self, request: dict[str, Any], owner: str | None = None) -> JobRecord:
         job_id = str(uuid.uuid4())
-        record = JobRecord(job_id, "queued", 0.0, datetime.now(timezone.utc).isoformat(), request)
+        record = JobRecord(job_id, "queued", 0.0, datetime.now(timezone.utc).isoformat(), request, owner=owner)
         with self._lock:
             self._forget_expired()
             self._jobs[job_id] = record
@@ -88,9 +89,10 @@ class EmbeddedBackend:
                 if not cancelled.is_set():
                     record.result, record.progress, record.status = result, 1.0, "succeeded"
 
-    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]]) -> tuple[str, str]:
+    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
+                        owner: str | None = None) -> tuple[str, str]:
         ensemble_id = str(uuid.uuid4())
-        created_at = self.ensembles.create(ensemble_id, request, chunks)
+        created_at = self.ensembles.create(ensemble_id, request, chunks, owner)
         self._ensemble_ids.append(ensemble_id)
         for chunk in range(len(chunks)):
             self._pool.submit(run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded")
@@ -112,7 +114,8 @@ class EmbeddedBackend:
                 record.status = "cancelled"
         return record
 
-    def list_jobs(self, status: str | None, limit: int, cursor: str | None) -> tuple[list[JobRecord], str | None]:
+    def list_jobs(self, status: str | None, limit: int, cursor: str | None,
+                  owner: str | None = None) -> tuple[list[JobRecord], str | None]:
         """Newest first by (created_at, id); exact: the next cursor is None once nothing more matches."""
         after = decode_cursor(cursor) if cursor is not None else None
         with self._lock:
@@ -120,10 +123,18 @@ class EmbeddedBackend:
             keyed = sorted(((datetime.fromisoformat(r.created_at).timestamp(), r.id), r) for r in self._jobs.values())
         keyed.reverse()
         matching = [(key, r) for key, r in keyed
-                    if (after is None or key < after) and (status is None or r.status == status)]
+                    if (after is None or key < after) and (status is None or r.status == status)
+                    and visible(r.owner, owner)]
         page = matching[:limit]
         more = len(matching) > limit
         return [r for _, r in page], encode_cursor(*page[-1][0]) if more else None
+
+    def active_jobs(self, owner: str, enough: int) -> int:
+        with self._lock:
+            return sum(1 for r in self._jobs.values() if r.status in ("queued", "running") and r.owner == owner)
+
+    def queued_messages(self) -> int:
+        return self._pool._work_queue.qsize()  # jobs and chunks not started by a thread yet
 
     def health(self) -> dict[str, Any]:
         warm = self._warm.is_set()

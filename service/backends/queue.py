@@ -18,6 +18,7 @@ from celery.result import AsyncResult
 
 from schemas.jobs import TERMINAL_STATUSES
 from schemas.settings import Settings
+from service.access import visible
 from service.backends.base import JobRecord, decode_cursor, encode_cursor
 from workers.celery_app import app as celery_app
 from workers.ensembles import RedisEnsembleStore
@@ -79,11 +80,11 @@ class QueueBackend:
         self._health_redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=HEALTH_TIMEOUT_S,
                                                   socket_connect_timeout=HEALTH_TIMEOUT_S)
 
-    def submit(self, request: dict[str, Any]) -> JobRecord:
+    def submit(self, request: dict[str, Any], owner: str | None = None) -> JobRecord:
         job_id = str(uuid.uuid4())
-        created_at = self.registry.create(job_id, request)
+        created_at = self.registry.create(job_id, request, owner)
         simulate_job.apply_async(args=[request], task_id=job_id, queue=self.settings.queue)
-        return JobRecord(job_id, "queued", 0.0, created_at, request)
+        return JobRecord(job_id, "queued", 0.0, created_at, request, owner=owner)
 
     def get(self, job_id: str) -> JobRecord | None:
         entry = self.registry.get(job_id) or self._discover(job_id)
@@ -92,7 +93,7 @@ class QueueBackend:
         outcome = AsyncResult(job_id, app=celery_app)
         state = outcome.state
         status, progress = _job_status(state, outcome.info, entry["cancelled"])
-        record = JobRecord(job_id, status, progress, entry["created_at"], entry["request"])
+        record = JobRecord(job_id, status, progress, entry["created_at"], entry["request"], owner=entry["owner"])
         if status == "succeeded":
             record.result = outcome.result
         elif status == "failed":
@@ -127,7 +128,8 @@ class QueueBackend:
             if not known:
                 self.registry.ensure(job_id, request_from_args(found[job_id][1], found[job_id][2])[0])
 
-    def list_jobs(self, status: str | None, limit: int, cursor: str | None) -> tuple[list[JobRecord], str | None]:
+    def list_jobs(self, status: str | None, limit: int, cursor: str | None,
+                  owner: str | None = None) -> tuple[list[JobRecord], str | None]:
         """Newest first from the index ``nonholonomic:jobs``; statuses from the records (terminal ones the
         worker wrote) or the result backend (queued and running ones: small), never the results.
 
@@ -144,7 +146,8 @@ class QueueBackend:
         more = True
         while len(page) < limit and scanned < LIST_SCAN_LIMIT:
             # Unfiltered, one entry more than the page needs says whether there is a next page.
-            want = min(LIST_BATCH, limit - len(page) + 1) if status is None else LIST_BATCH
+            filtered = status is not None or owner is not None
+            want = LIST_BATCH if filtered else min(LIST_BATCH, limit - len(page) + 1)
             batch = self._after(position, want)
             if not batch:
                 more = False
@@ -156,7 +159,7 @@ class QueueBackend:
                 position = (score, job_id)
                 if record is None:
                     expired.append(job_id)
-                elif status is None or record.status == status:
+                elif (status is None or record.status == status) and visible(record.owner, owner):
                     page.append(record)
                     if len(page) == limit:
                         more = n < len(batch) or bool(self._after(position, 1))
@@ -203,7 +206,8 @@ class QueueBackend:
             else:
                 meta = metas.get(job_id) or {}
                 status, progress = _job_status(meta.get("status", "PENDING"), meta.get("result"), entry["cancelled"])
-            records.append(JobRecord(job_id, status, progress, entry["created_at"], entry["request"]))
+            records.append(JobRecord(job_id, status, progress, entry["created_at"], entry["request"],
+                                     owner=entry["owner"]))
         return records
 
     def cancel(self, job_id: str) -> JobRecord | None:
@@ -215,9 +219,10 @@ class QueueBackend:
         record.status = "cancelled"
         return record
 
-    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]]) -> tuple[str, str]:
+    def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
+                        owner: str | None = None) -> tuple[str, str]:
         ensemble_id = str(uuid.uuid4())
-        created_at = self.ensembles.create(ensemble_id, request, chunks)
+        created_at = self.ensembles.create(ensemble_id, request, chunks, owner)
         group(ensemble_chunk.si(ensemble_id, i).set(task_id=_chunk_task_id(ensemble_id, i), queue=self.settings.queue)
               for i in range(len(chunks))).apply_async()
         return ensemble_id, created_at
@@ -228,6 +233,12 @@ class QueueBackend:
         if record is not None:  # queued chunks are dropped by the worker that receives them
             celery_app.control.revoke([_chunk_task_id(ensemble_id, i) for i in range(len(record["chunks"]))
                                        if i not in record["done"]])
+
+    def active_jobs(self, owner: str, enough: int) -> int:
+        return self.registry.active_count(owner, enough)
+
+    def queued_messages(self) -> int:
+        return int(self.redis.llen(self.settings.queue))
 
     def health(self) -> dict[str, Any]:
         try:

@@ -9,6 +9,8 @@ from fastapi.responses import JSONResponse, StreamingResponse
 
 from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView, MembersPage
 from schemas.problems import CONFLICT, NOT_FOUND, FieldError
+from service.access import ensemble_of
+from service.admission import admit_work
 from service.backends import JobBackend
 from service.ensembles import members_page, section_csv, section_npz, view
 from service.errors import (
@@ -19,6 +21,7 @@ from service.errors import (
     media_responses,
     problem_responses,
 )
+from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
 
 #: Operation ids are explicit, ``ensembles-<verb>``; a route without one gets ``ensembles-<its name>``.
@@ -34,26 +37,30 @@ def _backend(request: Request) -> JobBackend:
 
 
 def _record(request: Request, ensemble_id: str) -> dict[str, Any]:
-    record = _backend(request).ensembles.record(ensemble_id)
-    if record is None:
-        raise ProblemError(404, "Unknown ensemble", f"no ensemble with id {ensemble_id!r}", NOT_FOUND)
-    return record
+    return ensemble_of(request, ensemble_id)
 
 
 @router.post("", status_code=202, operation_id="ensembles-submit", response_model=EnsembleAccepted,
-             responses=problem_responses({422: INVALID, 503: UNAVAILABLE_BACKEND}),
+             responses=problem_responses({409: IDEMPOTENCY_IN_PROGRESS, 422: INVALID + IDEMPOTENCY_MISMATCH,
+                                          429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND}),
              summary="Submit an ensemble (members from a list, a level set or a parameter sweep)")
-def submit_ensemble(body: EnsembleRequest, request: Request, response: Response) -> EnsembleAccepted:
+def submit_ensemble(body: EnsembleRequest, request: Request) -> JSONResponse:
     """Every member is validated before anything is queued; then the chunks go to the workers."""
     problems = body.problems()
     if problems:
         raise invalid_request([FieldError(field=p.field, reason=p.reason) for p in problems])
     chunks = body.chunks()
-    ensemble_id, _ = _backend(request).submit_ensemble(body.model_dump(mode="json"), chunks)
-    location = f"/v1/ensembles/{ensemble_id}"
-    response.headers["Location"] = location
-    return EnsembleAccepted(id=ensemble_id, status="queued", location=location, members=body.members.count,
-                            chunks=len(chunks))
+    spec = body.model_dump(mode="json")
+
+    def create() -> tuple[dict[str, Any], dict[str, str]]:
+        admit_work(request, request.app.state.settings)
+        ensemble_id, _ = _backend(request).submit_ensemble(spec, chunks, request.state.owner)
+        location = f"/v1/ensembles/{ensemble_id}"
+        accepted = EnsembleAccepted(id=ensemble_id, status="queued", location=location, members=body.members.count,
+                                    chunks=len(chunks))
+        return accepted.model_dump(), {"Location": location}
+
+    return idempotent(request, spec, create)
 
 
 @router.get("/{ensemble_id}", operation_id="ensembles-get", response_model=EnsembleView, responses=_ERRORS,

@@ -11,6 +11,8 @@ from schemas.job_list import DEFAULT_LIMIT, MAX_LIMIT, STATUSES, JobList, JobLis
 from schemas.jobs import JobAccepted, JobRequest, JobView
 from schemas.problems import CONFLICT, NOT_FOUND, FieldError
 from schemas.results import TrajectoryExport
+from service.access import job_of
+from service.admission import admit_work
 from service.backends import JobBackend, JobRecord
 from service.backends.base import InvalidCursor
 from service.errors import (
@@ -22,6 +24,7 @@ from service.errors import (
     problem_responses,
 )
 from service.exports import trajectory_csv, trajectory_npz
+from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
 
 #: Operation ids are explicit, ``jobs-<verb>``; a route without one gets ``jobs-<its name>``.
@@ -39,29 +42,31 @@ def _view(record: JobRecord) -> dict[str, Any]:
             "request": record.request, "result": record.result, "error": record.error}
 
 
-def _found(record: JobRecord | None, job_id: str) -> JobRecord:
-    if record is None:
-        raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
-    return record
-
-
 @router.post("", status_code=202, operation_id="jobs-submit", response_model=JobAccepted,
-             responses=problem_responses({422: INVALID, 503: UNAVAILABLE_BACKEND}), summary="Submit a simulation job")
-def submit_job(job: JobRequest, request: Request, response: Response) -> JobAccepted:
-    """Validate (shape, ranges, |γ| = 1, state names) and queue; nothing is queued if invalid."""
+             responses=problem_responses({409: IDEMPOTENCY_IN_PROGRESS, 422: INVALID + IDEMPOTENCY_MISMATCH,
+                                          429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND}),
+             summary="Submit a simulation job")
+def submit_job(job: JobRequest, request: Request) -> JSONResponse:
+    """Validate (shape, ranges, |γ| = 1, state names) and queue; nothing is queued if invalid. With an
+    ``Idempotency-Key`` a retry answers the first response again."""
     problems = job.problems()
     if problems:
         raise invalid_request([FieldError(field=p.field, reason=p.reason) for p in problems])
-    record = _backend(request).submit(job.model_dump(mode="json"))
-    location = f"/v1/jobs/{record.id}"
-    response.headers["Location"] = location
-    return JobAccepted(id=record.id, status="queued", location=location)
+    body = job.model_dump(mode="json")
+
+    def create() -> tuple[dict[str, Any], dict[str, str]]:
+        admit_work(request, request.app.state.settings)
+        record = _backend(request).submit(body, request.state.owner)
+        location = f"/v1/jobs/{record.id}"
+        return JobAccepted(id=record.id, status="queued", location=location).model_dump(), {"Location": location}
+
+    return idempotent(request, body, create)
 
 
 @router.get("/{job_id}", operation_id="jobs-get", response_model=JobView, responses=_ERRORS,
             summary="Status, progress and result of a job")
 def get_job(job_id: str, request: Request) -> JSONResponse:
-    return JSONResponse(_view(_found(_backend(request).get(job_id), job_id)))
+    return JSONResponse(_view(job_of(request, job_id)))
 
 
 @router.get("/{job_id}/trajectory", operation_id="jobs-trajectory", response_model=TrajectoryExport,
@@ -73,7 +78,7 @@ def get_job(job_id: str, request: Request) -> JSONResponse:
             summary="The sampled trajectory as JSON, CSV (a header with units; t and tau first) or NPZ")
 def get_trajectory(job_id: str, request: Request,
                    format: Literal["json", "csv", "npz"] = Query("json")) -> Response:  # noqa: A002
-    record = _found(_backend(request).get(job_id), job_id)
+    record = job_of(request, job_id)
     if record.status != "succeeded" or record.result is None:
         raise ProblemError(409, "No trajectory yet", f"job {job_id} is {record.status}; its trajectory is there once "
                                                      "it succeeded", CONFLICT)
@@ -93,11 +98,13 @@ def get_trajectory(job_id: str, request: Request,
                summary="Cancel a job (202 with the job's view)")
 def cancel_job(job_id: str, request: Request) -> JSONResponse:
     """A queued job never starts; a running one stops at its next progress report (≤ 0.2 s)."""
-    backend = _backend(request)
-    before = _found(backend.get(job_id), job_id)
+    before = job_of(request, job_id)
     if before.status in ("succeeded", "failed"):
         raise ProblemError(409, "Job already finished", f"job {job_id} already {before.status}", CONFLICT)
-    return JSONResponse(_view(_found(backend.cancel(job_id), job_id)), status_code=202)
+    after = _backend(request).cancel(job_id)
+    if after is None:
+        raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
+    return JSONResponse(_view(after), status_code=202)
 
 
 @router.get("", operation_id="jobs-list", response_model=JobList,
@@ -110,12 +117,13 @@ def list_jobs(request: Request,
               limit: int = Query(DEFAULT_LIMIT, ge=1, le=MAX_LIMIT, description="most items on the page"),
               cursor: str | None = Query(None, description="a previous page's next_cursor, as it is")) -> JobList:
     """Every job this service knows (posted, or sent straight to the queue by a job-queue client),
-    newest first: id, status, progress, created_at, kind, location."""
+    newest first: id, status, progress, created_at, kind, location. With API keys: the key's jobs and
+    those sent straight to the queue."""
     if status is not None and status not in STATUSES:
         raise invalid_request([FieldError(field="status", reason=f"{status!r} is not a job status; one of "
                                                                  f"{', '.join(STATUSES)}")])
     try:
-        records, next_cursor = _backend(request).list_jobs(status, limit, cursor)
+        records, next_cursor = _backend(request).list_jobs(status, limit, cursor, request.state.owner)
     except InvalidCursor as exc:
         raise invalid_request([FieldError(field="cursor", reason=str(exc))]) from None
     return JobList(items=[JobListItem(id=r.id, status=r.status, progress=r.progress, created_at=r.created_at,  # type: ignore[arg-type]

@@ -15,6 +15,7 @@ from nonholonomic.systems import get_system
 from schemas.problems import CONFLICT, NOT_FOUND
 from schemas.report import REPORT_JOB
 from schemas.results import system_units
+from service.access import ensemble_of, job_of
 from service.backends import JobBackend, JobRecord
 from service.ensembles import members_page, view
 from service.errors import ProblemError, media_responses, problem_responses
@@ -61,17 +62,11 @@ def _backend(request: Request) -> JobBackend:
 
 
 def _job(request: Request, job_id: str) -> JobRecord:
-    record = _backend(request).get(job_id)
-    if record is None:
-        raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
-    return record
+    return job_of(request, job_id)
 
 
 def _ensemble(request: Request, ensemble_id: str) -> dict[str, Any]:
-    record = _backend(request).ensembles.record(ensemble_id)
-    if record is None:
-        raise ProblemError(404, "Unknown ensemble", f"no ensemble with id {ensemble_id!r}", NOT_FOUND)
-    return record
+    return ensemble_of(request, ensemble_id)
 
 
 def _image(data: bytes, fmt: str, filename: str) -> Response:

@@ -194,3 +194,25 @@ def test_cli_exit_codes_for_a_failed_job_and_a_server_error(tmp_path, capsys, mo
                    "detail": "KeyError: the server failed; this is a bug"}))
     assert main(["--url", "http://api", "systems"]) == 3
     assert capsys.readouterr().err == "error: Internal error: KeyError: the server failed; this is a bug\n"
+
+
+def test_the_client_sends_its_api_key_as_a_bearer_token(monkeypatch):
+    import httpx
+
+    from client import Client
+
+    seen: list[str | None] = []
+
+    def handler(request: httpx.Request) -> httpx.Response:
+        seen.append(request.headers.get("authorization"))
+        return httpx.Response(200, json={"systems": []})
+
+    with Client("http://api.test", api_key="k-1", transport=httpx.MockTransport(handler)) as api:
+        api.systems()
+    monkeypatch.setenv("NONHOLONOMIC_API_KEY", "k-2")
+    with Client("http://api.test", transport=httpx.MockTransport(handler)) as api:
+        api.systems()
+    monkeypatch.delenv("NONHOLONOMIC_API_KEY")
+    with Client("http://api.test", transport=httpx.MockTransport(handler)) as api:
+        api.systems()
+    assert seen == ["Bearer k-1", "Bearer k-2", None]

@@ -43,3 +43,9 @@ def test_workers_get_a_stop_grace_period_above_the_hard_time_limit():
     worker = services["worker"]
     hard_limit = float(worker["environment"]["NONHOLONOMIC_JOB_TIME_LIMIT_S"])
     assert worker["stop_signal"] == "SIGTERM" and _seconds(worker["stop_grace_period"]) > hard_limit
+
+
+def test_api_keys_and_a_rate_limit_are_on():
+    env = _compose()["services"]["api"]["environment"]
+    assert env["NONHOLONOMIC_API_KEYS"].startswith("${NONHOLONOMIC_API_KEYS:?")
+    assert int(env["NONHOLONOMIC_RATE_LIMIT_PER_MINUTE"]) > 0

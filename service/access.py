@@ -1,0 +1,145 @@
+"""Access: optional API keys, each key's own jobs, per-key rate limits.
+
+Off unless keys are configured (``NONHOLONOMIC_API_KEYS`` and/or ``NONHOLONOMIC_API_KEYS_FILE``,
+entries ``name:key`` or ``key``). With keys, every ``/v1`` route needs one, sent as
+``Authorization: Bearer <key>`` or ``X-API-Key: <key>`` (else 401); the key's *owner* (its name,
+or ``key-`` and 12 hex digits of its SHA-256) is recorded with each job and ensemble it submits,
+and another key gets a 404 for it, as for an id that does not exist. Jobs sent straight to the
+broker (no owner) are visible to every key. ``/health``, ``/docs`` and ``/openapi.json`` need no key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from fastapi import Request
+
+from schemas.problems import NOT_FOUND, RATE_LIMITED, UNAUTHORIZED
+from schemas.settings import Settings
+from service.errors import ProblemError
+
+if TYPE_CHECKING:
+    from service.backends.base import JobRecord
+
+
+def _owner_of(name: str | None, key: str) -> str:
+    return name or "key-" + hashlib.sha256(key.encode()).hexdigest()[:12]
+
+
+def load_keys(settings: Settings) -> dict[str, str]:
+    """SHA-256 of each configured key → its owner. Raises ValueError for an empty or duplicated key."""
+    entries = [e.strip() for e in (settings.api_keys or "").split(",") if e.strip()]
+    if settings.api_keys_file:
+        lines = Path(settings.api_keys_file).read_text().splitlines()
+        entries += [line.strip() for line in lines if line.strip() and not line.lstrip().startswith("#")]
+    keys: dict[str, str] = {}
+    for entry in entries:
+        name, _, key = entry.rpartition(":")
+        if not key:
+            raise ValueError("an API key entry has an empty key")
+        digest = hashlib.sha256(key.encode()).hexdigest()
+        if digest in keys:
+            raise ValueError("an API key is listed twice")
+        keys[digest] = _owner_of(name or None, key)
+    return keys
+
+
+@dataclass
+class _Bucket:
+    tokens: float
+    updated: float
+
+
+@dataclass
+class RateLimiter:
+    """A token bucket per owner: ``per_minute`` requests a minute, bursts up to ``per_minute``
+    (per API process)."""
+
+    per_minute: int
+    _buckets: dict[str, _Bucket] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def wait_s(self, owner: str) -> float:
+        """0 if ``owner`` may make a request now (one token taken), else seconds until it may."""
+        rate = self.per_minute / 60.0
+        now = time.monotonic()
+        with self._lock:
+            bucket = self._buckets.setdefault(owner, _Bucket(float(self.per_minute), now))
+            bucket.tokens = min(float(self.per_minute), bucket.tokens + (now - bucket.updated) * rate)
+            bucket.updated = now
+            if bucket.tokens >= 1.0:
+                bucket.tokens -= 1.0
+                return 0.0
+            return (1.0 - bucket.tokens) / rate
+
+
+class Access:
+    """The API's keys and rate limiter (``app.state.access``)."""
+
+    def __init__(self, settings: Settings) -> None:
+        self.keys = load_keys(settings)
+        self.limiter = RateLimiter(settings.rate_limit_per_minute) if settings.rate_limit_per_minute else None
+
+    @property
+    def enabled(self) -> bool:
+        return bool(self.keys)
+
+    def owner(self, request: Request) -> str | None:
+        """The caller's owner id (None when keys are off); 401 without a valid key, 429 past its rate."""
+        if not self.keys:
+            return None
+        key = request.headers.get("x-api-key")
+        authorization = request.headers.get("authorization", "")
+        if key is None and authorization[:7].lower() == "bearer ":
+            key = authorization[7:].strip()
+        if not key:
+            raise ProblemError(401, "API key required", "send your API key as 'Authorization: Bearer <key>' or "
+                               "'X-API-Key: <key>'", UNAUTHORIZED, headers={"WWW-Authenticate": "Bearer"})
+        digest = hashlib.sha256(key.encode()).hexdigest()
+        owner = next((o for d, o in self.keys.items() if hmac.compare_digest(d, digest)), None)
+        if owner is None:
+            raise ProblemError(401, "Unknown API key", "the API key sent is not one of this service's",
+                               UNAUTHORIZED, headers={"WWW-Authenticate": 'Bearer error="invalid_token"'})
+        if self.limiter is not None:
+            wait = self.limiter.wait_s(owner)
+            if wait > 0:
+                retry = max(1, math.ceil(wait))
+                raise ProblemError(429, "Rate limit", f"this key may make {self.limiter.per_minute} requests a "
+                                   f"minute; retry after {retry} s", RATE_LIMITED, headers={"Retry-After": str(retry)})
+        return owner
+
+
+def caller(request: Request) -> str | None:
+    """FastAPI dependency: the caller's owner id (see :meth:`Access.owner`), kept on ``request.state``."""
+    owner = request.app.state.access.owner(request)
+    request.state.owner = owner
+    return owner
+
+
+def job_of(request: Request, job_id: str) -> JobRecord:
+    """The job ``job_id`` if the caller may see it, else a 404 (the same as for an unknown id)."""
+    record = request.app.state.backend.get(job_id)
+    if record is None or not visible(record.owner, getattr(request.state, "owner", None)):
+        raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
+    return record
+
+
+def ensemble_of(request: Request, ensemble_id: str) -> dict[str, Any]:
+    """The ensemble's record if the caller may see it, else a 404 (the same as for an unknown id)."""
+    record = request.app.state.backend.ensembles.record(ensemble_id)
+    if record is None or not visible(record.get("owner"), getattr(request.state, "owner", None)):
+        raise ProblemError(404, "Unknown ensemble", f"no ensemble with id {ensemble_id!r}", NOT_FOUND)
+    return record
+
+
+def visible(owner_of_item: str | None, caller_owner: str | None) -> bool:
+    """Whether a job or ensemble owned by ``owner_of_item`` is the caller's to see: keys off, no owner
+    (sent straight to the broker), or the same owner."""
+    return caller_owner is None or owner_of_item is None or owner_of_item == caller_owner
