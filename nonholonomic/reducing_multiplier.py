@@ -198,7 +198,12 @@ class _Sampler:
         """``f(*args values) -> [mpf]`` at 40 digits, the parameters filled in (as exact inputs:
         substituting floats into sympy would round every intermediate to 15 digits)."""
         names = self.symbols
-        fn = sp.lambdify(list(args) + list(names), list(exprs), modules="mpmath")
+        exprs = [_without_step_derivatives(e) for e in exprs]
+        try:
+            fn = sp.lambdify(list(args) + list(names), list(exprs), modules="mpmath")
+        except Exception as exc:  # sympy cannot print it as code (an unevaluated special function ...)
+            raise ValueError(f"an expression derived from the input cannot be evaluated numerically: "
+                             f"{type(exc).__name__}: {str(exc).splitlines()[0]}") from None
         values = [self.values[s] for s in names]
 
         def evaluate(*x: float) -> list[Any]:
@@ -206,6 +211,17 @@ class _Sampler:
                 return [mpmath.mpmathify(r) for r in fn(*[mpmath.mpf(v) for v in list(x) + values])]
 
         return evaluate
+
+
+def _without_step_derivatives(expr: sp.Expr) -> sp.Expr:
+    """``expr`` with derivatives of floor and ceiling set to 0. sympy's antiderivatives of periodic
+    functions (1/(2 + cos x)) hold floor((x - pi)/(2 pi)) to be continuous; its derivative is 0 away
+    from the jumps, where random sample points fall with probability 1, and sympy leaves it
+    unevaluated (``Derivative(floor(...))``), which lambdify cannot print."""
+    if not isinstance(expr, sp.Basic) or not expr.has(sp.Derivative):
+        return expr
+    return expr.replace(lambda e: isinstance(e, sp.Derivative) and isinstance(e.expr, (sp.floor, sp.ceiling)),
+                        lambda e: sp.S.Zero)
 
 
 def _relative(total: Any, terms: Sequence[Any]) -> float:

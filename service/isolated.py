@@ -10,11 +10,13 @@ has not answered within the hard limit it is killed.
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
+log = logging.getLogger(__name__)
 #: Seconds a child may take beyond the request's own budget (start-up, numeric checks, the answer).
 GRACE_S = 10.0
 
@@ -25,8 +27,13 @@ _CONTEXT.set_forkserver_preload(["nonholonomic.reducing_multiplier", "nonholonom
 
 def start_fork_server() -> None:
     """Start the fork server and wait for its preloaded imports (about a second of CPU), at the API's
-    start-up: during the first symbolic requests it would take a core from them and from ``/health``."""
-    run_isolated(_nothing, (), 120.0)
+    start-up: during the first symbolic requests it would take a core from them and from ``/health``.
+    A failure (e.g. an interpreter whose main module cannot be re-imported) is logged, not raised: the
+    API serves everything else, and a symbolic request reports it."""
+    try:
+        run_isolated(_nothing, (), 120.0)
+    except Exception as exc:  # the API still starts
+        log.warning("the symbolic fork server did not start: %s", exc)
 
 
 def _nothing() -> None:

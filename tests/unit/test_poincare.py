@@ -244,10 +244,12 @@ def test_progress_is_reported_and_cancels():
 def test_batch_progress_covers_every_member_and_cancels():
     system, P, Y = members(6)
     seen: list[float] = []
-    section_batch(system, P, Y, 200.0, "gamma3", progress=lambda f: seen.append(f) or True)
-    assert seen[-1] == pytest.approx(1.0) and all(np.diff(seen) > 0)
+    # long enough for several segments whatever the SIMD width (6 members: 2 batches of 4 with AVX2,
+    # 1 batch of 8 with AVX-512, where t_final = 200 took two segments only)
+    section_batch(system, P, Y, 3000.0, "gamma3", progress=lambda f: seen.append(f) or True)
+    assert seen[-1] == pytest.approx(1.0) and all(np.diff(seen) > 0) and len(seen) >= 4
     with pytest.raises(IntegrationCancelled):
-        section_batch(system, P, Y, 200.0, "gamma3", progress=lambda f: f < 0.3)
+        section_batch(system, P, Y, 3000.0, "gamma3", progress=lambda f: f < 0.3)
 
 
 def test_threads_use_their_own_integrator_copies():

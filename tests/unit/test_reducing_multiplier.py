@@ -409,3 +409,18 @@ def test_a_zero_budget_leaves_the_measure_undecided():
     assert time.perf_counter() - start < 10
     assert result.measure_exists is None and "budget" in result.reason
     assert result.reducing_multiplier is None and result.verification["passed"] is None
+
+
+def test_a_density_with_floor_from_a_periodic_antiderivative_is_verified():
+    """Found by the API fuzzer (a 500): for L = (q1dot^2 + (2 + cos q1) q2dot^2)/2 with constant a1, a2, b,
+    sympy's antiderivative of 1/(2 + cos q1) holds floor((q1 - pi)/(2 pi)); the pointwise check of
+    Theorem 1 differentiates it (0 away from the jumps) and must still evaluate, and pass."""
+    from nonholonomic.expressions import declare_symbols, parse_expression
+    from nonholonomic.reducing_multiplier import hamiltonize
+
+    s = declare_symbols(["x", "y", "a", "b"])
+    result = hamiltonize(parse_expression("(a**2 + (2 + cos(x))*b**2)/2", s), (s["x"], s["y"]), (s["a"], s["b"]),
+                         parse_expression("2", s), parse_expression("0.25", s), parse_expression("2", s), None, {},
+                         budget_s=5.0).to_json()
+    assert "floor" in result["density"]
+    assert result["verification"]["passed"] is True and result["verification"]["residual"] < 1e-30
