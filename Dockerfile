@@ -11,6 +11,7 @@ COPY schemas ./schemas
 COPY service ./service
 COPY workers ./workers
 COPY client ./client
+COPY store ./store
 RUN pip install --no-cache-dir . && useradd --create-home app
 USER app
 EXPOSE 8000

@@ -17,6 +17,12 @@ class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="NONHOLONOMIC_", extra="ignore")
 
     redis_url: str | None = Field(None, validation_alias=AliasChoices("REDIS_URL", "NONHOLONOMIC_REDIS_URL"))
+    database_url: str | None = Field(
+        None, validation_alias=AliasChoices("DATABASE_URL", "NONHOLONOMIC_DATABASE_URL"),
+        description="where job records and results live (SQLAlchemy URL); embedded mode's default: a SQLite file "
+                    "in data_dir")
+    data_dir: str = Field(".nonholonomic", description="folder of embedded mode's SQLite file (relative: to the "
+                                                       "working directory)")
     queue: str = Field("nonholonomic", description="Celery queue the API sends jobs to and workers consume")
     max_t_final: float = Field(1e5, gt=0, description="largest accepted t_final")
     max_samples: int = Field(100_001, ge=2, description="largest accepted number of samples")
@@ -50,6 +56,15 @@ class Settings(BaseSettings):
     @property
     def embedded(self) -> bool:
         return not self.redis_url
+
+    @property
+    def store_url(self) -> str:
+        """``database_url``, else the SQLite file ``data_dir/jobs.sqlite3``."""
+        if self.database_url:
+            return self.database_url
+        from pathlib import Path
+
+        return f"sqlite:///{Path(self.data_dir).expanduser().resolve() / 'jobs.sqlite3'}"
 
 
 @lru_cache(maxsize=1)

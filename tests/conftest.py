@@ -7,12 +7,26 @@ reproducible and no new counterexample's shrinking can blow the time limit. Loca
 from __future__ import annotations
 
 import os
+import tempfile
 
+import pytest
 from hypothesis import settings
+
+# Embedded mode's job store: never the working directory's .nonholonomic/ (a module-scoped app uses
+# this folder; each test gets a fresh one below).
+os.environ.setdefault("NONHOLONOMIC_DATA_DIR", tempfile.mkdtemp(prefix="nonholonomic-tests-"))
 
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("dev", deadline=None, print_blob=True)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
+
+
+@pytest.fixture(autouse=True)
+def _fresh_job_store(monkeypatch, tmp_path) -> None:
+    """Each test's embedded apps start with an empty job store (SQLite in the test's tmp_path)."""
+    monkeypatch.setenv("NONHOLONOMIC_DATA_DIR", str(tmp_path / "store"))
+    monkeypatch.delenv("NONHOLONOMIC_DATABASE_URL", raising=False)
+    monkeypatch.delenv("DATABASE_URL", raising=False)
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:  # type: ignore[no-untyped-def]

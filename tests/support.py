@@ -6,6 +6,7 @@ import os
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -32,7 +33,11 @@ def free_port() -> int:
 
 
 def _env(extra: Mapping[str, str]) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("NONHOLONOMIC_") and k != "REDIS_URL"}
+    """The environment of a started process: ours without the service's settings, then ``extra``; an
+    embedded job store of its own (a fresh folder) unless ``extra`` names one."""
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith("NONHOLONOMIC_") and k not in ("REDIS_URL", "DATABASE_URL")}
+    env["NONHOLONOMIC_DATA_DIR"] = tempfile.mkdtemp(prefix="nonholonomic-store-")
     env.update(extra)
     return env
 

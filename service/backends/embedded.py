@@ -4,33 +4,34 @@ Celery task (:func:`workers.jobs.run_job`). For a first run on a bare machine: n
 from __future__ import annotations
 
 import threading
-import time
 import uuid
 from concurrent.futures import ThreadPoolExecutor
-from datetime import datetime, timezone
 from typing import Any
 
 from nonholonomic.integration import IntegrationCancelled
-from schemas.jobs import TERMINAL_STATUSES
 from schemas.settings import Settings
-from service.access import visible
 from service.backends.base import JobRecord, decode_cursor, encode_cursor
+from store.jobs import JobStore, StoredJob
 from workers.ensembles import MemoryEnsembleStore, run_ensemble_chunk
 from workers.jobs import run_job, warm_up
 
 
 class EmbeddedBackend:
-    """Jobs in memory, run by ``settings.embedded_workers`` threads; finished jobs are forgotten
-    ``settings.job_ttl_s`` after they were submitted."""
+    """Jobs recorded in a SQLite file (:mod:`store`), run by ``settings.embedded_workers`` threads.
+
+    A restart loses nothing: jobs that were queued or running when the API stopped are run again
+    when it starts. Finished jobs are deleted ``settings.job_ttl_s`` after they were submitted.
+    Ensembles live in memory (they do not outlive the process).
+    """
 
     mode = "embedded"
 
     def __init__(self, settings: Settings) -> None:
-        self._jobs: dict[str, JobRecord] = {}
+        self.store = JobStore(settings.store_url, settings.job_ttl_s)
+        self.store.migrate()
+        self._progress: dict[str, float] = {}
         self._cancel: dict[str, threading.Event] = {}
-        self._submitted: dict[str, float] = {}
         self._lock = threading.Lock()
-        self._ttl_s = settings.job_ttl_s
         self._threads = settings.embedded_workers
         self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="nonholonomic-job")
         self.ensembles = MemoryEnsembleStore()
@@ -40,6 +41,10 @@ class EmbeddedBackend:
             threading.Thread(target=self._warm_up, daemon=True, name="nonholonomic-warm-up").start()
         else:
             self._warm.set()
+        self.resumed = [job.id for job in self.store.unfinished()]
+        for job_id in self.resumed:  # interrupted by the last stop: run again
+            self.store.requeue(job_id)
+            self._enqueue(job_id)
 
     def _warm_up(self) -> None:
         try:
@@ -47,47 +52,43 @@ class EmbeddedBackend:
         finally:
             self._warm.set()
 
+    def _enqueue(self, job_id: str) -> None:
+        with self._lock:
+            self._cancel[job_id] = threading.Event()
+            self._progress[job_id] = 0.0
+        self._pool.submit(self._run, job_id)
+
     def submit(self, request: dict[str, Any], owner: str | None = None) -> JobRecord:
         job_id = str(uuid.uuid4())
-        record = JobRecord(job_id, "queued", 0.0, datetime.now(timezone.utc).isoformat(), request, owner=owner)
-        with self._lock:
-            self._forget_expired()
-            self._jobs[job_id] = record
-            self._cancel[job_id] = threading.Event()
-            self._submitted[job_id] = time.monotonic()
-        self._pool.submit(self._run, job_id)
-        return record
-
-    def _forget_expired(self) -> None:
-        horizon = time.monotonic() - self._ttl_s
-        for job_id in [j for j, t in self._submitted.items() if t < horizon]:
-            if self._jobs[job_id].status in TERMINAL_STATUSES:
-                del self._jobs[job_id], self._cancel[job_id], self._submitted[job_id]
+        created_at = self.store.create(job_id, request, owner)
+        self._enqueue(job_id)
+        return JobRecord(job_id, "queued", 0.0, created_at, request, owner=owner)
 
     def _run(self, job_id: str) -> None:
-        record, cancelled = self._jobs[job_id], self._cancel[job_id]
-        with self._lock:
-            if cancelled.is_set():
-                return
-            record.status = "running"
+        cancelled = self._cancel[job_id]
+        stored = self.store.get(job_id)
+        if stored is None or cancelled.is_set() or not self.store.start(job_id):
+            self._forget(job_id)
+            return
 
         def progress(fraction: float) -> bool:
-            record.progress = fraction
+            self._progress[job_id] = fraction
             return not cancelled.is_set()
 
         try:
-            result = run_job(record.request, progress)
+            result = run_job(stored.request, progress)
         except IntegrationCancelled:
-            return
+            pass
         except Exception as exc:  # reported to the client as the job's error
-            with self._lock:
-                if not cancelled.is_set():
-                    record.error = {"type": type(exc).__name__, "message": str(exc)}
-                    record.status = "failed"
+            self.store.finish(job_id, "failed", error={"type": type(exc).__name__, "message": str(exc)})
         else:
-            with self._lock:
-                if not cancelled.is_set():
-                    record.result, record.progress, record.status = result, 1.0, "succeeded"
+            self.store.finish(job_id, "succeeded", result=result)
+        self._forget(job_id)
+
+    def _forget(self, job_id: str) -> None:
+        with self._lock:
+            self._cancel.pop(job_id, None)
+            self._progress.pop(job_id, None)
 
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
                         owner: str | None = None) -> tuple[str, str]:
@@ -101,37 +102,31 @@ class EmbeddedBackend:
     def cancel_ensemble(self, ensemble_id: str) -> None:
         self.ensembles.cancel(ensemble_id)
 
+    def _record(self, job: StoredJob) -> JobRecord:
+        progress = 1.0 if job.status == "succeeded" else self._progress.get(job.id, 0.0)
+        return JobRecord(job.id, job.status, progress, job.created_at, job.request, result=job.result,
+                         error=job.error, owner=job.owner)
+
     def get(self, job_id: str) -> JobRecord | None:
-        return self._jobs.get(job_id)
+        job = self.store.get(job_id)
+        return None if job is None else self._record(job)
 
     def cancel(self, job_id: str) -> JobRecord | None:
-        record = self._jobs.get(job_id)
-        if record is None:
-            return None
-        with self._lock:
-            if record.status not in TERMINAL_STATUSES:
-                self._cancel[job_id].set()
-                record.status = "cancelled"
-        return record
+        if self.store.cancel(job_id):
+            event = self._cancel.get(job_id)
+            if event is not None:
+                event.set()  # a running job stops at its next progress report
+        return self.get(job_id)
 
     def list_jobs(self, status: str | None, limit: int, cursor: str | None,
                   owner: str | None = None) -> tuple[list[JobRecord], str | None]:
         """Newest first by (created_at, id); exact: the next cursor is None once nothing more matches."""
         after = decode_cursor(cursor) if cursor is not None else None
-        with self._lock:
-            self._forget_expired()
-            keyed = sorted(((datetime.fromisoformat(r.created_at).timestamp(), r.id), r) for r in self._jobs.values())
-        keyed.reverse()
-        matching = [(key, r) for key, r in keyed
-                    if (after is None or key < after) and (status is None or r.status == status)
-                    and visible(r.owner, owner)]
-        page = matching[:limit]
-        more = len(matching) > limit
-        return [r for _, r in page], encode_cursor(*page[-1][0]) if more else None
+        jobs, more = self.store.page(status, limit, after, owner)
+        return [self._record(j) for j in jobs], encode_cursor(jobs[-1].created, jobs[-1].id) if more else None
 
     def active_jobs(self, owner: str, enough: int) -> int:
-        with self._lock:
-            return sum(1 for r in self._jobs.values() if r.status in ("queued", "running") and r.owner == owner)
+        return self.store.active_count(owner)
 
     def queued_messages(self) -> int:
         return self._pool._work_queue.qsize()  # jobs and chunks not started by a thread yet
@@ -143,9 +138,11 @@ class EmbeddedBackend:
                 "workers": {"threads": self._threads, "warm": warm}, **({"detail": detail} if detail else {})}
 
     def close(self) -> None:
-        """Stop every job and ensemble chunk at its next progress report, drop what is queued."""
-        for event in self._cancel.values():
+        """Stop every job and ensemble chunk at its next progress report, drop what is queued (the jobs
+        stay queued or running in the store: the next start runs them again)."""
+        for event in list(self._cancel.values()):
             event.set()
         for ensemble_id in self._ensemble_ids:
             self.ensembles.cancel(ensemble_id)
         self._pool.shutdown(wait=False, cancel_futures=True)
+        self.store.close()

@@ -1,0 +1,43 @@
+"""The tables (SQLAlchemy 2 declarative). Their history is in ``store/migrations/versions``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import JSON, Float, Index, Integer, String
+from sqlalchemy.dialects.postgresql import JSONB
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
+
+#: JSON documents: JSONB on PostgreSQL, JSON (text) elsewhere.
+Document = JSON().with_variant(JSONB(), "postgresql")
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class JobRow(Base):
+    """A job: its request, its status, and once it ended its result or error.
+
+    ``created`` (epoch seconds) orders the list (keyset pagination on ``(created, id)``);
+    ``created_at`` is the same instant as the ISO 8601 string the API gave out at submission.
+    """
+
+    __tablename__ = "jobs"
+
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    owner: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    status: Mapped[str] = mapped_column(String(16))
+    request: Mapped[dict[str, Any]] = mapped_column(Document)
+    result: Mapped[dict[str, Any] | None] = mapped_column(Document, nullable=True)
+    error: Mapped[dict[str, Any] | None] = mapped_column(Document, nullable=True)
+    created: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[str] = mapped_column(String(40))
+    finished: Mapped[float | None] = mapped_column(Float, nullable=True)
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+
+    __table_args__ = (
+        Index("ix_jobs_created_id", "created", "id"),
+        Index("ix_jobs_owner_status", "owner", "status"),
+        Index("ix_jobs_status", "status"),
+    )
