@@ -8,6 +8,11 @@ from pydantic import AliasChoices, Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
+#: Queue mode's job store when ``DATABASE_URL`` is not set: PostgreSQL on this machine (the database is
+#: created if missing).
+DEFAULT_QUEUE_DATABASE_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/nonholonomic"
+
+
 class Settings(BaseSettings):
     """Settings; every field can be set as ``NONHOLONOMIC_<NAME>`` (``REDIS_URL`` also plain).
 
@@ -59,9 +64,12 @@ class Settings(BaseSettings):
 
     @property
     def store_url(self) -> str:
-        """``database_url``, else the SQLite file ``data_dir/jobs.sqlite3``."""
+        """``database_url``; else in queue mode the local PostgreSQL (:data:`DEFAULT_QUEUE_DATABASE_URL`),
+        in embedded mode the SQLite file ``data_dir/jobs.sqlite3``."""
         if self.database_url:
             return self.database_url
+        if not self.embedded:
+            return DEFAULT_QUEUE_DATABASE_URL
         from pathlib import Path
 
         return f"sqlite:///{Path(self.data_dir).expanduser().resolve() / 'jobs.sqlite3'}"

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Quick start, command 2: install into .venv (with the test extra), make sure Redis answers on
-127.0.0.1:6379 (starting ``redis-server``, installing Debian's package if it is missing) and that a
+127.0.0.1:6379 (starting ``redis-server``, installing Debian's package if it is missing), that
+PostgreSQL answers on 127.0.0.1:5432 (starting a cluster of the tests' own if not) and that a
 headless Chromium is there for the page tests (installing Debian's ``chromium`` if it is missing),
 then run the whole test suite. Extra arguments go to pytest (e.g. ``-k measure``).
 Screenshots and other artefacts of the run go to ``test-output/``."""
@@ -13,10 +14,12 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 from _bootstrap import PYTHON, ROOT, apt_install, ensure_installed, say
 
 REDIS_HOST, REDIS_PORT = "127.0.0.1", 6379
+PG_HOST, PG_PORT = "127.0.0.1", 5432
 #: Where the page tests look for the browser (Debian's package); NONHOLONOMIC_CHROMIUM overrides it.
 CHROMIUM = "/usr/bin/chromium"
 
@@ -45,6 +48,47 @@ def ensure_redis() -> None:
     raise SystemExit("redis-server started but does not answer PING on 127.0.0.1:6379")
 
 
+def postgres_answers() -> bool:
+    try:
+        with socket.create_connection((PG_HOST, PG_PORT), timeout=1):
+            return True
+    except OSError:
+        return False
+
+
+def _postgres_bin() -> Path | None:
+    found = sorted(Path("/usr/lib/postgresql").glob("*/bin/pg_ctl"), key=lambda p: int(p.parent.parent.name))
+    return found[-1].parent if found else None
+
+
+def ensure_postgres() -> None:
+    """PostgreSQL on 127.0.0.1:5432, queue mode's job store: the machine's, else a cluster of the tests'
+    own (trust authentication, user postgres) in /var/tmp, with Debian's binaries (installed if missing)."""
+    if postgres_answers():
+        return
+    bindir = _postgres_bin()
+    if bindir is None and not (apt_install("postgresql") and (bindir := _postgres_bin())):
+        raise SystemExit("no PostgreSQL on 127.0.0.1:5432 and Debian's postgresql cannot be installed: install it "
+                         "and retry")
+    data = Path(os.environ.get("NONHOLONOMIC_TEST_PGDATA", "/var/tmp/nonholonomic-postgres"))
+    as_postgres = ["runuser", "-u", "postgres", "--"] if os.geteuid() == 0 else []
+    if not (data / "PG_VERSION").exists():
+        data.mkdir(parents=True, exist_ok=True)
+        if as_postgres:
+            shutil.chown(data, "postgres", "postgres")
+        say(f"creating a PostgreSQL cluster in {data}")
+        subprocess.run([*as_postgres, str(bindir / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres"],
+                       check=True, stdout=subprocess.DEVNULL)
+    say("starting PostgreSQL on 127.0.0.1:5432")
+    subprocess.run([*as_postgres, str(bindir / "pg_ctl"), "-D", str(data), "-l", str(data / "server.log"), "-w",
+                    "-o", f"-p {PG_PORT} -k /tmp -c listen_addresses={PG_HOST}", "start"], check=True)
+    for _ in range(100):
+        if postgres_answers():
+            return
+        time.sleep(0.1)
+    raise SystemExit("PostgreSQL started but does not answer on 127.0.0.1:5432")
+
+
 def ensure_chromium() -> str:
     """The headless browser of the page tests (Playwright drives it; no browser download)."""
     browser = os.environ.get("NONHOLONOMIC_CHROMIUM", CHROMIUM)
@@ -62,6 +106,7 @@ def ensure_chromium() -> str:
 def main(argv: list[str]) -> int:
     ensure_installed("test")
     ensure_redis()
+    ensure_postgres()
     env = {**os.environ, "NONHOLONOMIC_CHROMIUM": ensure_chromium(), "NONHOLONOMIC_REQUIRE_BROWSER": "1",
            "NONHOLONOMIC_TEST_OUTPUT": os.environ.get("NONHOLONOMIC_TEST_OUTPUT", str(ROOT / "test-output"))}
     os.chdir(ROOT)

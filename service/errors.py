@@ -10,6 +10,7 @@ from typing import Any
 import redis
 from fastapi import FastAPI, Request
 from kombu.exceptions import OperationalError
+from sqlalchemy.exc import OperationalError as DatabaseUnavailable
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -151,8 +152,9 @@ def install_error_handlers(app: FastAPI) -> None:
 
     @app.exception_handler(redis.RedisError)
     @app.exception_handler(OperationalError)
+    @app.exception_handler(DatabaseUnavailable)
     async def _unavailable(request: Request, exc: Exception) -> JSONResponse:
-        log.warning("job store or broker unavailable: %s", exc)
+        log.warning("job store or broker unavailable: %s", str(exc).splitlines()[0] if str(exc) else exc)
         return _respond(Problem(type=UNAVAILABLE, title="Service unavailable", status=503,
                                 detail=f"the job store or broker cannot be reached ({type(exc).__name__}); retry later"),
                         request)

@@ -14,7 +14,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import Engine, and_, create_engine, delete, event, func, or_, select, update
+from sqlalchemy import Engine, and_, create_engine, delete, event, func, or_, select, text, update
+from sqlalchemy.engine import make_url
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from store.models import JobRow
@@ -38,6 +40,7 @@ class StoredJob:
     result: dict[str, Any] | None = None
     error: dict[str, Any] | None = None
     attempts: int = 0
+    queue: str | None = None
 
 
 def _now() -> datetime:
@@ -64,6 +67,23 @@ def make_engine(url: str) -> Engine:
     return create_engine(url, pool_pre_ping=True, pool_size=10, max_overflow=10)
 
 
+def ensure_database(url: str) -> None:
+    """Create the PostgreSQL database of ``url`` if it does not exist (connecting to ``postgres``)."""
+    target = make_url(url)
+    admin = create_engine(target.set(database="postgres"), isolation_level="AUTOCOMMIT")
+    try:
+        with admin.connect() as connection:
+            exists = connection.scalar(text("SELECT 1 FROM pg_database WHERE datname = :name"),
+                                       {"name": target.database})
+            if not exists:
+                try:
+                    connection.execute(text(f'CREATE DATABASE "{target.database}"'))
+                except Exception:  # created meanwhile by another process
+                    pass
+    finally:
+        admin.dispose()
+
+
 class JobStore:
     """Jobs in the database at ``url``; finished ones kept ``ttl_s`` seconds after their creation."""
 
@@ -75,13 +95,19 @@ class JobStore:
         self._cleaning = threading.Lock()
 
     def migrate(self) -> None:
-        """Bring the schema to the newest revision (Alembic ``upgrade head``)."""
+        """Create the database if it is missing (PostgreSQL) and bring the schema to the newest revision
+        (Alembic ``upgrade head``); on PostgreSQL under an advisory lock, so that the API and several
+        workers starting at once migrate one after the other."""
         from alembic import command
         from alembic.config import Config
 
+        if self.engine.dialect.name == "postgresql":
+            ensure_database(self.url)
         config = Config()
         config.set_main_option("script_location", str(Path(__file__).parent / "migrations"))
         with self.engine.begin() as connection:
+            if connection.dialect.name == "postgresql":
+                connection.execute(text("SELECT pg_advisory_xact_lock(726457)"))
             config.attributes["connection"] = connection
             command.upgrade(config, "head")
 
@@ -90,20 +116,44 @@ class JobStore:
 
     # -- writing ---------------------------------------------------------------------------------
 
-    def create(self, job_id: str, request: dict[str, Any], owner: str | None = None) -> str:
-        """Record a queued job; returns its ``created_at`` (ISO 8601, UTC)."""
+    def create(self, job_id: str, request: dict[str, Any], owner: str | None = None, queue: str | None = None,
+               broker_epoch: str | None = None) -> str:
+        """Record a queued job (sent to ``queue`` in the broker's ``broker_epoch``); returns its
+        ``created_at`` (ISO 8601, UTC)."""
         now = _now()
         with self._session.begin() as session:
             session.add(JobRow(id=job_id, owner=owner, status="queued", request=request, created=now.timestamp(),
-                               created_at=now.isoformat(), attempts=0))
+                               created_at=now.isoformat(), attempts=0, queue=queue, broker_epoch=broker_epoch))
         self._clean_now_and_then(now.timestamp())
         return now.isoformat()
 
-    def start(self, job_id: str) -> bool:
-        """Mark a queued (or interrupted running) job running; False if it ended (do not run it)."""
+    def ensure(self, job_id: str, request: dict[str, Any], queue: str | None = None,
+               broker_epoch: str | None = None) -> bool:
+        """Record a queued job unless one with this id exists (a job sent straight to the broker);
+        True if this call created it."""
+        if self.status(job_id) is not None:
+            return False
+        try:
+            self.create(job_id, request, None, queue, broker_epoch)
+        except IntegrityError:  # created meanwhile by another process
+            return False
+        return True
+
+    def delete(self, job_id: str) -> None:
+        """Forget a job that could not be sent (the broker refused it)."""
         with self._session.begin() as session:
-            done = session.execute(update(JobRow).where(JobRow.id == job_id, JobRow.status.in_(ACTIVE))
-                                   .values(status="running", attempts=JobRow.attempts + 1))
+            session.execute(delete(JobRow).where(JobRow.id == job_id, JobRow.status == "queued"))
+
+    def start(self, job_id: str, worker: str) -> bool:
+        """Mark the job running on ``worker`` if it is queued, or was running on that same worker (its
+        pool process died and the worker took it again); False otherwise: it ended, was cancelled, or
+        runs elsewhere (do not run it)."""
+        with self._session.begin() as session:
+            done = session.execute(
+                update(JobRow).where(JobRow.id == job_id,
+                                     or_(JobRow.status == "queued",
+                                         and_(JobRow.status == "running", JobRow.worker == worker)))
+                .values(status="running", worker=worker, attempts=JobRow.attempts + 1))
             return done.rowcount == 1  # type: ignore[attr-defined]
 
     def finish(self, job_id: str, status: str, result: dict[str, Any] | None = None,
@@ -124,11 +174,42 @@ class JobStore:
                                    .values(status="cancelled", finished=_now().timestamp()))
             return done.rowcount == 1  # type: ignore[attr-defined]
 
-    def requeue(self, job_id: str) -> None:
-        """Put a job that was running when its runner stopped back to ``queued``."""
+    def requeue(self, job_id: str, worker: str | None = None, broker_epoch: str | None = None) -> bool:
+        """Put a job that was running (on ``worker``, if given) back to ``queued``, to be sent again in
+        ``broker_epoch``; True if this call did (so that one caller sends it)."""
+        condition = [JobRow.id == job_id, JobRow.status == "running"]
+        if worker is not None:
+            condition.append(JobRow.worker == worker)
         with self._session.begin() as session:
-            session.execute(update(JobRow).where(JobRow.id == job_id, JobRow.status == "running")
-                            .values(status="queued"))
+            done = session.execute(update(JobRow).where(*condition)
+                                   .values(status="queued", worker=None, broker_epoch=broker_epoch))
+            return done.rowcount == 1  # type: ignore[attr-defined]
+
+    def resend_claim(self, job_id: str, old_epoch: str | None, broker_epoch: str) -> bool:
+        """Claim a queued job sent in ``old_epoch`` for sending again in ``broker_epoch``; True for the
+        one caller that claims it."""
+        with self._session.begin() as session:
+            epoch = JobRow.broker_epoch.is_(None) if old_epoch is None else JobRow.broker_epoch == old_epoch
+            done = session.execute(update(JobRow).where(JobRow.id == job_id, JobRow.status == "queued", epoch)
+                                   .values(broker_epoch=broker_epoch))
+            return done.rowcount == 1  # type: ignore[attr-defined]
+
+    def sent_before(self, broker_epoch: str, limit: int = 1000) -> list[tuple[str, dict[str, Any], str | None, str | None]]:
+        """Queued jobs sent in another broker epoch (their messages are gone): (id, request, queue, epoch)."""
+        with self._session() as session:
+            rows = session.execute(select(JobRow.id, JobRow.request, JobRow.queue, JobRow.broker_epoch)
+                                   .where(JobRow.status == "queued",
+                                          or_(JobRow.broker_epoch.is_(None), JobRow.broker_epoch != broker_epoch))
+                                   .order_by(JobRow.created).limit(limit))
+            return [tuple(row) for row in rows]  # type: ignore[misc]
+
+    def running_on(self) -> dict[str, list[str]]:
+        """Running jobs by the worker running them."""
+        with self._session() as session:
+            found: dict[str, list[str]] = {}
+            for job_id, worker in session.execute(select(JobRow.id, JobRow.worker).where(JobRow.status == "running")):
+                found.setdefault(worker or "", []).append(job_id)
+            return found
 
     def delete_expired(self) -> int:
         """Delete ended jobs created more than ``ttl_s`` ago; returns how many."""
@@ -152,7 +233,7 @@ class JobStore:
     def _stored(row: Any, with_result: bool) -> StoredJob:
         return StoredJob(id=row.id, status=row.status, request=row.request, created_at=row.created_at,
                          created=row.created, owner=row.owner, result=row.result if with_result else None,
-                         error=row.error, attempts=row.attempts)
+                         error=row.error, attempts=row.attempts, queue=getattr(row, "queue", None))
 
     def get(self, job_id: str) -> StoredJob | None:
         with self._session() as session:

@@ -35,6 +35,11 @@ class JobRow(Base):
     created_at: Mapped[str] = mapped_column(String(40))
     finished: Mapped[float | None] = mapped_column(Float, nullable=True)
     attempts: Mapped[int] = mapped_column(Integer, default=0)
+    #: The heartbeat key of the worker running it (workers.heartbeat), while it runs.
+    worker: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    #: The queue it was sent to, and the broker's epoch then (a new epoch: the broker lost its messages).
+    queue: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    broker_epoch: Mapped[str | None] = mapped_column(String(64), nullable=True)
 
     __table_args__ = (
         Index("ix_jobs_created_id", "created", "id"),

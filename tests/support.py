@@ -17,6 +17,31 @@ import redis
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 TEST_REDIS_URL = os.environ.get("NONHOLONOMIC_TEST_REDIS_URL", "redis://127.0.0.1:6379/15")
+#: Queue mode's job store in the tests (created if missing; the README's test command starts PostgreSQL).
+TEST_DATABASE_URL = os.environ.get("NONHOLONOMIC_TEST_DATABASE_URL",
+                                   "postgresql+psycopg://postgres@127.0.0.1:5432/nonholonomic_test")
+
+
+def fresh_database_url() -> str:
+    """The URL of a PostgreSQL database of its own (created by the first JobStore.migrate): a test that
+    lists every job sees only its own."""
+    import uuid
+
+    from sqlalchemy.engine import make_url
+
+    url = make_url(TEST_DATABASE_URL)
+    return url.set(database=f"{url.database}_{uuid.uuid4().hex[:10]}").render_as_string(hide_password=False)
+
+
+def drop_database(url: str) -> None:
+    from sqlalchemy import create_engine, text
+    from sqlalchemy.engine import make_url
+
+    target = make_url(url)
+    admin = create_engine(target.set(database="postgres"), isolation_level="AUTOCOMMIT")
+    with admin.connect() as connection:
+        connection.execute(text(f'DROP DATABASE IF EXISTS "{target.database}" WITH (FORCE)'))
+    admin.dispose()
 
 
 def redis_available(url: str = TEST_REDIS_URL) -> bool:
@@ -38,6 +63,7 @@ def _env(extra: Mapping[str, str]) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items()
            if not k.startswith("NONHOLONOMIC_") and k not in ("REDIS_URL", "DATABASE_URL")}
     env["NONHOLONOMIC_DATA_DIR"] = tempfile.mkdtemp(prefix="nonholonomic-store-")
+    env["NONHOLONOMIC_DATABASE_URL"] = TEST_DATABASE_URL if extra.get("REDIS_URL") else ""
     env.update(extra)
     return env
 

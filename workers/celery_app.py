@@ -65,6 +65,8 @@ def make_app() -> Celery:
 app = make_app()
 
 
+#: The task of a simulation job.
+SIMULATE = "nonholonomic.simulate"
 _heartbeats: list[Any] = []
 _sweepers: list[Any] = []
 
@@ -89,11 +91,29 @@ def _warm_up(**_: Any) -> None:
     from workers.heartbeat import process_key
 
     _heartbeats.clear()  # copies of the main process's, inherited by the fork: not ours to stop
+    from workers.job_store import job_store
+
+    if job_store.cache_info().currsize:  # the main process's engine, inherited: its connections are not ours
+        job_store().engine.dispose(close=False)
+    _open_job_store()
     if get_settings().warm_up:
         from workers.jobs import warm_up
 
         warm_up()
     _beat(process_key(), "warm")
+
+
+def _open_job_store() -> None:
+    """Connect to the job store (and migrate it) before taking jobs: not inside the first job's time
+    limit. A database that is away now is tried again by the first job."""
+    from workers.job_store import job_store
+
+    try:
+        job_store()
+    except Exception as exc:
+        import logging
+
+        logging.getLogger(__name__).warning("the job store is not reachable yet: %s", str(exc).splitlines()[0])
 
 
 @worker_ready.connect
@@ -106,9 +126,10 @@ def _announce(sender: Any = None, **_: Any) -> None:
 
     from workers.redelivery import Sweeper
 
+    _open_job_store()
     queues = sorted(q.name for q in sender.task_consumer.queues)
     _beat(worker_key(), json.dumps({"name": sender.hostname, "queues": queues}))
-    _sweepers.append(Sweeper(_redis(), _send_again).start())
+    _sweepers.append(Sweeper([_sweep_tasks, _sweep_jobs]).start())
     if "prefork" not in type(sender.pool).__module__:  # solo or threads: jobs run in this process
         if get_settings().warm_up:
             from workers.jobs import warm_up
@@ -119,6 +140,23 @@ def _announce(sender: Any = None, **_: Any) -> None:
 
 def _send_again(name: str, args: Any, kwargs: Any, task_id: str, queue: str) -> None:
     app.send_task(name, args=args, kwargs=kwargs, task_id=task_id, queue=queue)
+
+
+def _sweep_tasks() -> None:
+    """Tasks (ensemble chunks) held by a worker that died whole: sent again (workers.redelivery)."""
+    from workers.redelivery import sweep
+
+    sweep(_redis(), _send_again, skip=(SIMULATE,))
+
+
+def _sweep_jobs() -> None:
+    """Jobs whose message the broker lost or whose worker died: sent again (workers.job_store)."""
+    from workers.job_store import job_store, resend_lost
+
+    client = _redis()
+    resend_lost(job_store(), client,
+                lambda request, job_id, queue: _send_again(SIMULATE, [request], {}, job_id, queue),
+                lambda worker: bool(client.exists(worker)))
 
 
 @task_received.connect

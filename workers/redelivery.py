@@ -59,9 +59,10 @@ def release_owned(client: redis.Redis, owner: str) -> None:
             client.delete(key)
 
 
-def sweep(client: redis.Redis, send: Any) -> list[str]:
-    """Send again every task whose owner is dead; returns their ids. ``send(name, args, kwargs, task_id,
-    queue)`` publishes a task."""
+def sweep(client: redis.Redis, send: Any, skip: tuple[str, ...] = ()) -> list[str]:
+    """Send again every task whose owner is dead, but tasks named in ``skip`` (their own sweep sends
+    them: jobs, from the job store); returns their ids. ``send(name, args, kwargs, task_id, queue)``
+    publishes a task."""
     keys = list(client.scan_iter(match=PREFIX + "*", count=1000))
     if not keys:
         return []
@@ -78,6 +79,10 @@ def sweep(client: redis.Redis, send: Any) -> list[str]:
     alive = dict(zip(owners, (bool(n) for n in _exists_each(client, owners))))
     resent = []
     for task_id, entry in held.items():
+        if entry["name"] in skip:
+            if not alive.get(entry["owner"], True):
+                client.delete(inflight_key(task_id))
+            continue
         if alive.get(entry["owner"], True) or not client.delete(inflight_key(task_id)):
             continue  # the owner lives, or another sweep claimed it
         send(entry["name"], entry["args"], entry["kwargs"], task_id, entry["queue"])
@@ -95,10 +100,11 @@ def _exists_each(client: redis.Redis, keys: list[str]) -> list[int]:
 
 
 class Sweeper:
-    """A daemon thread calling :func:`sweep` every :data:`SWEEP_INTERVAL_S` seconds."""
+    """A daemon thread calling ``sweeps`` (each a function of no argument) every
+    :data:`SWEEP_INTERVAL_S` seconds."""
 
-    def __init__(self, client: redis.Redis, send: Any) -> None:
-        self._client, self._send = client, send
+    def __init__(self, sweeps: list[Any]) -> None:
+        self._sweeps = sweeps
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True, name="nonholonomic-redelivery")
 
@@ -108,10 +114,11 @@ class Sweeper:
 
     def _run(self) -> None:
         while True:
-            try:
-                sweep(self._client, self._send)
-            except redis.RedisError as exc:
-                log.warning("redelivery sweep skipped: %s", exc)
+            for one in self._sweeps:
+                try:
+                    one()
+                except Exception as exc:  # the broker or the database is away: next time
+                    log.warning("redelivery sweep skipped: %s: %s", type(exc).__name__, exc)
             if self._stop.wait(SWEEP_INTERVAL_S):
                 return
 

@@ -8,31 +8,30 @@ from typing import Any
 
 import redis
 from celery import Task, states
-from celery.exceptions import Ignore, SoftTimeLimitExceeded
+from celery.exceptions import Ignore, SoftTimeLimitExceeded, TimeLimitExceeded
+from sqlalchemy.exc import OperationalError
 
 from nonholonomic.integration import IntegrationCancelled
 from schemas.settings import get_settings
 from workers.celery_app import DEFAULT_REDIS_URL, app
 from workers.ensembles import RedisEnsembleStore, run_ensemble_chunk
 from workers.jobs import InvalidJob, run_job
-from workers.registry import RedisJobRegistry, request_from_args
+from workers.job_store import job_store
+from workers.broker_messages import request_from_args
 
 #: Seconds between progress updates (and cancellation checks) of a running job.
 PROGRESS_INTERVAL_S = 0.2
+#: Seconds a worker retries writing a job's end while the database is away.
+STORE_RETRY_S = 600.0
 
 
 class JobTimeout(RuntimeError):
     """The job ran past its soft time limit."""
 
 
-@lru_cache(maxsize=1)
-def _registry() -> RedisJobRegistry:
-    settings = get_settings()
-    return RedisJobRegistry(redis.Redis.from_url(settings.redis_url or DEFAULT_REDIS_URL), settings.job_ttl_s)
-
-
 class _Progress:
-    """Reports progress through ``update_state`` and stops the job when it was cancelled."""
+    """Reports progress through ``update_state`` and stops the job when it was cancelled (its status in
+    the store, read at most every :data:`PROGRESS_INTERVAL_S`)."""
 
     def __init__(self, task: Task, job_id: str) -> None:
         self.task, self.job_id, self.last = task, job_id, time.monotonic()
@@ -42,51 +41,83 @@ class _Progress:
         if now - self.last < PROGRESS_INTERVAL_S:
             return True
         self.last = now
-        if _registry().is_cancelled(self.job_id):
+        if job_store().status(self.job_id) == "cancelled":
             return False
         self.task.update_state(state="PROGRESS", meta={"progress": fraction})
         return True
 
 
-class _JobTask(Task):
-    """Records the job's terminal status in the registry once Celery stored the outcome (``after_return``
-    runs after the result backend was written), so the job list need not read results."""
+def _record_end(job_id: str, status: str, result: dict[str, Any] | None = None,
+                error: dict[str, str] | None = None) -> None:
+    """Write the job's end to the store, retrying while the database is away (up to
+    :data:`STORE_RETRY_S`): a result computed is not thrown away because PostgreSQL restarts."""
+    deadline = time.monotonic() + STORE_RETRY_S
+    delay = 0.5
+    while True:
+        try:
+            job_store().finish(job_id, status, result=result, error=error)
+            return
+        except OperationalError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(delay)
+            delay = min(2 * delay, 10.0)
 
-    def after_return(self, status: str, retval: Any, task_id: str, args: Any, kwargs: Any, einfo: Any) -> None:
-        recorded = {states.SUCCESS: "succeeded", states.FAILURE: "failed"}.get(status)
-        if recorded is not None:
-            _registry().set_status(task_id, recorded)
+
+class _JobTask(Task):
+    """Records a failure in the store, also one Celery notes in the worker's main process (a job killed
+    at its hard time limit)."""
+
+    def on_failure(self, exc: BaseException, task_id: str, args: Any, kwargs: Any, einfo: Any) -> None:
+        if isinstance(exc, TimeLimitExceeded):
+            exc = JobTimeout(f"the job was killed at its hard time limit of {get_settings().job_time_limit_s:g} s")
+        _record_end(task_id, "failed", error={"type": type(exc).__name__, "message": str(exc)})
 
 
 @app.task(bind=True, base=_JobTask, name="nonholonomic.simulate")
 def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
-    """Run a simulation job; returns the result JSON.
+    """Run a simulation job; its result goes to the job store (the task returns only the status).
 
     The one argument is the request: a ``JobRequest`` (or ``PaperReportRequest``) as a JSON object, or
     a string holding that JSON. A job sent straight to the queue by a job-queue client
-    (``send_task("nonholonomic.simulate", args=[request], queue=...)``) is registered here when it
-    starts, unless the API registered it already (it keeps the API's record and cancellation flag).
-    Anything else fails with the reason (:class:`workers.jobs.InvalidJob`).
+    (``send_task("nonholonomic.simulate", args=[request], queue=...)``) is recorded here when it
+    starts, unless the API recorded it already. A job that ended, was cancelled or runs on another
+    worker is not run (a message delivered twice). Anything invalid fails with the reason
+    (:class:`workers.jobs.InvalidJob`).
     """
     job_id = self.request.id
     request, refused = request_from_args(args, kwargs)
-    registry = _registry()
-    registry.ensure(job_id, request)
-    if registry.finished(job_id):  # a redelivered message of a finished job (workers.redelivery)
-        raise Ignore()
-    if registry.is_cancelled(job_id):
-        self.update_state(state=states.REVOKED)
+    store = job_store()
+    store.ensure(job_id, request, (self.request.delivery_info or {}).get("routing_key"))
+    if not store.start(job_id, _worker_key()):
         raise Ignore()
     self.update_state(state=states.STARTED)
     if refused is not None:
         raise InvalidJob(refused)
     try:
-        return run_job(request, _Progress(self, job_id))
+        result = run_job(request, _Progress(self, job_id))
     except IntegrationCancelled:
         self.update_state(state=states.REVOKED)
         raise Ignore() from None
     except SoftTimeLimitExceeded:
         raise JobTimeout(f"the job exceeded its time limit of {get_settings().job_soft_time_limit_s:g} s") from None
+    _record_end(job_id, "succeeded", result=result)
+    return {"status": "succeeded"}
+
+
+def _worker_key() -> str:
+    """This worker's heartbeat key (its main process's): the runner recorded with a running job."""
+    import os
+
+    from workers.heartbeat import worker_key
+
+    return worker_key(os.getppid() if _in_pool_process() else os.getpid())
+
+
+def _in_pool_process() -> bool:
+    from billiard import current_process
+
+    return current_process().name != "MainProcess"
 
 
 @lru_cache(maxsize=1)

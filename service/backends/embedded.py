@@ -67,7 +67,7 @@ class EmbeddedBackend:
     def _run(self, job_id: str) -> None:
         cancelled = self._cancel[job_id]
         stored = self.store.get(job_id)
-        if stored is None or cancelled.is_set() or not self.store.start(job_id):
+        if stored is None or cancelled.is_set() or not self.store.start(job_id, "embedded"):
             self._forget(job_id)
             return
 

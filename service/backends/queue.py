@@ -1,7 +1,8 @@
-"""Queue mode: jobs go to Celery workers through Redis; the job registry lives in Redis too.
+"""Queue mode: jobs are recorded in the job store (PostgreSQL) and go to Celery workers through Redis,
+which is only the broker (and carries progress); ensembles' records live in Redis.
 
 Jobs sent straight to the queue by a job-queue client (``send_task("nonholonomic.simulate", ...)``)
-are jobs like any other: the task registers its job when it starts, and this backend registers one
+are jobs like any other: the task records its job when it starts, and this backend records one
 still waiting in the broker when asked for its id (``GET /v1/jobs/{id}``) or when listing the first
 page, reading at most :data:`BROKER_SCAN_LIMIT` messages of the queue (and, for an id, of the
 messages workers reserved but did not start yet).
@@ -16,15 +17,14 @@ import redis
 from celery import group
 from celery.result import AsyncResult
 
-from schemas.jobs import TERMINAL_STATUSES
 from schemas.settings import Settings
-from service.access import visible
 from service.backends.base import JobRecord, decode_cursor, encode_cursor
+from store.jobs import JobStore, StoredJob
 from workers.celery_app import app as celery_app
 from workers.ensembles import RedisEnsembleStore
 from workers.heartbeat import census
-from workers.registry import (
-    RedisJobRegistry,
+from workers.job_store import broker_epoch
+from workers.broker_messages import (
     parse_task_message,
     queued_messages,
     request_from_args,
@@ -36,30 +36,8 @@ from workers.tasks import ensemble_chunk, simulate_job
 #: queue is no longer; else its newest and oldest halves). One such scan per unknown id and per first
 #: page of the list.
 BROKER_SCAN_LIMIT = 1000
-#: Index entries read, at most, for one page of a list with a status filter (the page is then shorter
-#: than asked, with a next cursor after the last entry read).
-LIST_SCAN_LIMIT = 2000
-#: Index entries read per round trip while listing.
-LIST_BATCH = 200
-
 #: Seconds /health waits for Redis.
 HEALTH_TIMEOUT_S = 0.05
-
-#: Celery task state → job status.
-_STATUS = {"PENDING": "queued", "RECEIVED": "queued", "RETRY": "queued", "STARTED": "running",
-           "PROGRESS": "running", "SUCCESS": "succeeded", "FAILURE": "failed", "REVOKED": "cancelled"}
-
-
-def _job_status(state: str, info: Any, cancelled: bool) -> tuple[str, float]:
-    """``(status, progress)`` of a job from its Celery state and info and its cancellation flag."""
-    status = _STATUS.get(state, "running")
-    if cancelled and status not in ("succeeded", "failed"):
-        status = "cancelled"
-    if status == "succeeded":
-        return status, 1.0
-    if state == "PROGRESS" and isinstance(info, dict):
-        return status, float(info.get("progress", 0.0))
-    return status, 0.0
 
 
 def _chunk_task_id(ensemble_id: str, chunk: int) -> str:
@@ -67,42 +45,57 @@ def _chunk_task_id(ensemble_id: str, chunk: int) -> str:
 
 
 class QueueBackend:
-    """Submits to the Celery queue ``settings.queue``; status and results from the result backend."""
+    """Jobs recorded in the job store (PostgreSQL, :mod:`store`) and sent to the Celery queue
+    ``settings.queue``; workers write their ends and results to the store, progress through Celery."""
 
     mode = "queue"
 
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=5)
-        self.registry = RedisJobRegistry(self.redis, settings.job_ttl_s)
+        self.store = JobStore(settings.store_url, settings.job_ttl_s)
+        self.store.migrate()
         self.ensembles = RedisEnsembleStore(self.redis, settings.job_ttl_s)
         # /health answers within its deadline even when Redis does not
         self._health_redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=HEALTH_TIMEOUT_S,
                                                   socket_connect_timeout=HEALTH_TIMEOUT_S)
 
     def submit(self, request: dict[str, Any], owner: str | None = None) -> JobRecord:
+        """Record the job, then send it; if the broker refuses, the record is removed and the error
+        raised (a 503: nothing was accepted)."""
         job_id = str(uuid.uuid4())
-        created_at = self.registry.create(job_id, request, owner)
-        simulate_job.apply_async(args=[request], task_id=job_id, queue=self.settings.queue)
+        epoch = broker_epoch(self.redis)
+        created_at = self.store.create(job_id, request, owner, self.settings.queue, epoch)
+        try:
+            simulate_job.apply_async(args=[request], task_id=job_id, queue=self.settings.queue, retry=False)
+        except Exception:
+            self.store.delete(job_id)
+            raise
         return JobRecord(job_id, "queued", 0.0, created_at, request, owner=owner)
 
-    def get(self, job_id: str) -> JobRecord | None:
-        entry = self.registry.get(job_id) or self._discover(job_id)
-        if entry is None:
-            return None
-        outcome = AsyncResult(job_id, app=celery_app)
-        state = outcome.state
-        status, progress = _job_status(state, outcome.info, entry["cancelled"])
-        record = JobRecord(job_id, status, progress, entry["created_at"], entry["request"], owner=entry["owner"])
-        if status == "succeeded":
-            record.result = outcome.result
-        elif status == "failed":
-            exc = outcome.result
-            record.error = {"type": type(exc).__name__, "message": str(exc)}
-        return record
+    def _progress(self, job_id: str) -> float:
+        """A running job's progress as its worker last reported it (0 if Redis does not answer)."""
+        try:
+            outcome = AsyncResult(job_id, app=celery_app)
+            info = outcome.info if outcome.state == "PROGRESS" else None
+        except (redis.RedisError, OSError):
+            return 0.0
+        return float(info.get("progress", 0.0)) if isinstance(info, dict) else 0.0
 
-    def _discover(self, job_id: str) -> dict[str, Any] | None:
-        """Register a job a job-queue client sent straight to the queue, if its message is still there:
+    def _record(self, job: StoredJob, progress: bool) -> JobRecord:
+        value = 1.0 if job.status == "succeeded" else (self._progress(job.id) if progress and job.status == "running"
+                                                       else 0.0)
+        return JobRecord(job.id, job.status, value, job.created_at, job.request, result=job.result, error=job.error,
+                         owner=job.owner)
+
+    def get(self, job_id: str) -> JobRecord | None:
+        job = self.store.get(job_id)
+        if job is None and self._discover(job_id):
+            job = self.store.get(job_id)
+        return None if job is None else self._record(job, progress=True)
+
+    def _discover(self, job_id: str) -> bool:
+        """Record a job a job-queue client sent straight to the queue, if its message is still there:
         waiting in the queue, or taken by a worker that has not started it yet (kombu's ``unacked``)."""
         needle = job_id.encode()
         unacked_key = (celery_app.conf.broker_transport_options or {}).get("unacked_key", "unacked")
@@ -112,112 +105,43 @@ class QueueBackend:
                 continue
             parsed = parse_task_message(raw)
             if parsed is not None and parsed[0] == job_id:
-                self.registry.ensure(job_id, request_from_args(parsed[1], parsed[2])[0])
-                return self.registry.get(job_id)
-        return None
+                self.store.ensure(job_id, request_from_args(parsed[1], parsed[2])[0], self.settings.queue,
+                                  broker_epoch(self.redis))
+                return True
+        return False
 
     def _discover_all(self) -> None:
-        """Register every job waiting in the queue's (scanned part) that the registry does not know."""
-        found = {}
+        """Record every job waiting in the queue's (scanned part) that the store does not know."""
+        epoch = broker_epoch(self.redis)
         for raw in queued_messages(self.redis, self.settings.queue, BROKER_SCAN_LIMIT):
             parsed = parse_task_message(raw)
-            if parsed is not None:
-                found[parsed[0]] = parsed
-        ids = list(found)
-        for job_id, known in zip(ids, self.registry.exists_many(ids)):
-            if not known:
-                self.registry.ensure(job_id, request_from_args(found[job_id][1], found[job_id][2])[0])
+            if parsed is not None and parsed[0].count(".chunk-") == 0:
+                self.store.ensure(parsed[0], request_from_args(parsed[1], parsed[2])[0], self.settings.queue, epoch)
 
     def list_jobs(self, status: str | None, limit: int, cursor: str | None,
                   owner: str | None = None) -> tuple[list[JobRecord], str | None]:
-        """Newest first from the index ``nonholonomic:jobs``; statuses from the records (terminal ones the
-        worker wrote) or the result backend (queued and running ones: small), never the results.
-
-        With a status filter at most :data:`LIST_SCAN_LIMIT` index entries are read per page; if the
-        page is not full by then it ends early with a cursor after the last entry read.
-        """
+        """Newest first by (created_at, id) from the store; exact (the next cursor is None at the end)."""
         after = decode_cursor(cursor) if cursor is not None else None
         if after is None:
-            self._discover_all()
-        page: list[JobRecord] = []
-        expired: list[str] = []
-        position = after  # the last (score, id) read
-        scanned = 0
-        more = True
-        while len(page) < limit and scanned < LIST_SCAN_LIMIT:
-            # Unfiltered, one entry more than the page needs says whether there is a next page.
-            filtered = status is not None or owner is not None
-            want = LIST_BATCH if filtered else min(LIST_BATCH, limit - len(page) + 1)
-            batch = self._after(position, want)
-            if not batch:
-                more = False
-                break
-            entries = self.registry.get_many([job_id for job_id, _ in batch])
-            records = self._light_records(batch, entries)
-            for n, ((job_id, score), record) in enumerate(zip(batch, records), 1):
-                scanned += 1
-                position = (score, job_id)
-                if record is None:
-                    expired.append(job_id)
-                elif (status is None or record.status == status) and visible(record.owner, owner):
-                    page.append(record)
-                    if len(page) == limit:
-                        more = n < len(batch) or bool(self._after(position, 1))
-                        break
-            else:
-                if len(batch) < want:
-                    more = False
-                    break
-        self.registry.prune(expired)
-        return page, encode_cursor(*position) if more and position is not None else None
-
-    def _after(self, position: tuple[float, str] | None, count: int) -> list[tuple[str, float]]:
-        """Up to ``count`` index entries strictly after ``position`` in (score, id) descending order."""
-        if position is None:
-            return self.registry.newest(None, count)
-        score, last = position
-        want = count
-        while True:  # entries tied with ``position`` (same score) that come before it are skipped
-            batch = self.registry.newest(score, want)
-            kept = [(j, s) for j, s in batch if s < score or j < last]
-            if len(kept) >= count or len(batch) < want:
-                return kept[:count]
-            want = count + len(batch) - len(kept)  # the skipped ones head the batch: read past them
-
-    def _light_records(self, batch: list[tuple[str, float]],
-                       entries: list[dict[str, Any] | None]) -> list[JobRecord | None]:
-        """Records without results: the worker's recorded terminal status, else the task's state."""
-        backend = celery_app.backend
-        pending = [job_id for (job_id, _), e in zip(batch, entries) if e is not None and e["status"] is None]
-        metas: dict[str, Any] = {}
-        if pending:
-            pipe = self.redis.pipeline(transaction=False)
-            for job_id in pending:
-                pipe.get(backend.get_key_for_task(job_id))
-            metas = {job_id: backend.decode(raw) if raw is not None else None
-                     for job_id, raw in zip(pending, pipe.execute())}
-        records: list[JobRecord | None] = []
-        for (job_id, _), entry in zip(batch, entries):
-            if entry is None:
-                records.append(None)
-                continue
-            if entry["status"] is not None:
-                status, progress = entry["status"], 1.0 if entry["status"] == "succeeded" else 0.0
-            else:
-                meta = metas.get(job_id) or {}
-                status, progress = _job_status(meta.get("status", "PENDING"), meta.get("result"), entry["cancelled"])
-            records.append(JobRecord(job_id, status, progress, entry["created_at"], entry["request"],
-                                     owner=entry["owner"]))
-        return records
+            try:
+                self._discover_all()
+            except redis.RedisError:  # the broker is away: the store still answers
+                pass
+        jobs, more = self.store.page(status, limit, after, owner)
+        return [self._record(j, progress=False) for j in jobs], encode_cursor(jobs[-1].created, jobs[-1].id) if more else None
 
     def cancel(self, job_id: str) -> JobRecord | None:
-        record = self.get(job_id)
-        if record is None or record.status in TERMINAL_STATUSES:
-            return record
-        self.registry.cancel(job_id)  # a running job sees this within a progress interval
-        celery_app.control.revoke(job_id)  # a queued job is dropped by the worker that receives it
-        record.status = "cancelled"
-        return record
+        """A queued job never starts (the store says cancelled; the worker also drops a revoked message);
+        a running one stops at its next progress report."""
+        if self.store.cancel(job_id):
+            celery_app.control.revoke(job_id)
+        return self.get(job_id)
+
+    def active_jobs(self, owner: str, enough: int) -> int:
+        return self.store.active_count(owner)
+
+    def queued_messages(self) -> int:
+        return int(self.redis.llen(self.settings.queue))
 
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
                         owner: str | None = None) -> tuple[str, str]:
@@ -233,12 +157,6 @@ class QueueBackend:
         if record is not None:  # queued chunks are dropped by the worker that receives them
             celery_app.control.revoke([_chunk_task_id(ensemble_id, i) for i in range(len(record["chunks"]))
                                        if i not in record["done"]])
-
-    def active_jobs(self, owner: str, enough: int) -> int:
-        return self.registry.active_count(owner, enough)
-
-    def queued_messages(self) -> int:
-        return int(self.redis.llen(self.settings.queue))
 
     def health(self) -> dict[str, Any]:
         try:
@@ -260,4 +178,5 @@ class QueueBackend:
 
     def close(self) -> None:
         self.redis.close()
+        self.store.close()
         self._health_redis.close()

@@ -7,11 +7,12 @@ from fastapi.testclient import TestClient
 from schemas.settings import get_settings
 from service.main import create_app
 from tests.api.conftest import job
-from tests.support import free_port
+from tests.support import TEST_DATABASE_URL, free_port
 
 
 def test_unreachable_broker_gives_503_problems(monkeypatch):
     monkeypatch.setenv("REDIS_URL", f"redis://127.0.0.1:{free_port()}/0")
+    monkeypatch.setenv("NONHOLONOMIC_DATABASE_URL", TEST_DATABASE_URL)
     get_settings.cache_clear()
     try:
         with TestClient(create_app(), raise_server_exceptions=False) as client:

@@ -20,6 +20,7 @@ from celery import Celery
 
 from tests.reference import ball_reference
 from tests.support import (
+    TEST_DATABASE_URL,
     TEST_REDIS_URL,
     free_port,
     poll_job,
@@ -114,17 +115,20 @@ def test_job_runs_on_the_worker_and_matches_an_independent_reference(queue_stack
     assert np.max(np.abs(final - ref)) <= 1e-10
     assert all(i["passed"] and i["max_rel_drift"] <= 1e-13 for i in result["integrals"])
     assert all(c["passed"] for c in result["checks"])
-    assert store.exists(f"nonholonomic:job:{view['id']}")  # the registry knows it
+    from store.jobs import JobStore
+
+    stored = JobStore(TEST_DATABASE_URL, 600)
+    assert stored.get(view["id"]).result == result  # the job store (PostgreSQL) holds the result ...
+    meta = store.get(f"celery-task-meta-{view['id']}")
+    assert meta is None or len(meta) < 1000  # ... and Redis, the broker, does not
+    stored.close()
 
 
 def test_a_job_the_worker_refuses_is_reported_failed_with_its_reason(queue_stack):
-    # Bypass the API's validation: register a job and send an invalid request straight to the queue.
+    # Bypass the API's validation: send an invalid request straight to the queue (the worker records it).
     client, store, queue = queue_stack
     job_id = str(uuid.uuid4())
     bad = {**BODY, "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.0, 3.0]}}
-    from workers.registry import RedisJobRegistry
-
-    RedisJobRegistry(store, 600).create(job_id, bad)
     sender = Celery(broker=TEST_REDIS_URL, backend=TEST_REDIS_URL)
     sender.send_task("nonholonomic.simulate", args=[bad], task_id=job_id, queue=queue)
     view = poll_job(client, f"/v1/jobs/{job_id}", timeout=30)
@@ -139,11 +143,11 @@ def test_unknown_id_is_404_although_celery_says_pending(queue_stack):
 
 
 def test_invalid_job_is_refused_before_anything_is_queued(queue_stack):
-    client, store, _ = queue_stack
-    before = set(store.scan_iter("nonholonomic:job:*"))
+    client, store, queue = queue_stack
+    before = client.get("/v1/jobs", params={"limit": 500}).json()["items"]
     r = client.post("/v1/jobs", json={**BODY, "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0, 0, 2]}})
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "initial_state.gamma"
-    assert set(store.scan_iter("nonholonomic:job:*")) == before
+    assert client.get("/v1/jobs", params={"limit": 500}).json()["items"] == before and store.llen(queue) == 0
 
 
 def test_progress_moves_and_cancel_stops_the_running_job(queue_stack):

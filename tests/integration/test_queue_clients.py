@@ -15,15 +15,20 @@ import time
 import uuid
 from collections.abc import Iterator
 from contextlib import contextmanager
-from datetime import datetime, timezone
 
 import httpx
 import pytest
 import redis
 from celery import Celery
 
+from sqlalchemy import delete, update
+
+from store.jobs import JobStore
+from store.models import JobRow
 from tests.support import (
+    drop_database,
     free_port,
+    fresh_database_url,
     poll_job,
     redis_available,
     start_api,
@@ -36,6 +41,8 @@ from tests.support import (
 pytestmark = pytest.mark.integration
 
 REDIS_URL = os.environ.get("NONHOLONOMIC_TEST_QUEUE_CLIENTS_REDIS_URL", "redis://127.0.0.1:6379/14")
+#: A database of this module's own: its list tests see only its jobs.
+DATABASE_URL = fresh_database_url()
 #: The README's first job.
 README_JOB = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7,
                          "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}},
@@ -67,8 +74,10 @@ def stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, Celery,
     logs = tmp_path_factory.mktemp("queue-clients-logs")
     queue = f"test-qc-{uuid.uuid4().hex[:8]}"
     port = free_port()
-    worker = start_worker(REDIS_URL, queue, logs / "worker.log", extra_env=WORKER_ENV)
-    api = start_api(port, logs / "api.log", {"REDIS_URL": REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS})
+    database = {"NONHOLONOMIC_DATABASE_URL": DATABASE_URL}
+    worker = start_worker(REDIS_URL, queue, logs / "worker.log", extra_env={**WORKER_ENV, **database})
+    api = start_api(port, logs / "api.log", {"REDIS_URL": REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS,
+                                            **database})
     base = f"http://127.0.0.1:{port}"
     sender = Celery(broker=REDIS_URL, backend=REDIS_URL)  # a plain client: no app of this project
     try:
@@ -84,6 +93,7 @@ def stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, Celery,
         stop(worker)
         sender.close()
         store.flushdb()
+        drop_database(DATABASE_URL)
 
 
 def _send(sender: Celery, queue: str, *args, **kwargs) -> str:
@@ -153,7 +163,9 @@ def test_a_sent_job_cancelled_while_queued_never_runs(stack):
 def test_a_sent_job_registers_itself_when_it_starts_and_stops_when_cancelled(stack):
     client, store, sender, queue = stack
     job_id = _send(sender, queue, LONG)  # the worker is idle: it takes the job before the API hears of it
-    wait_until(lambda: store.exists(f"nonholonomic:job:{job_id}"), 120, "the task to register its job")
+    jobs = JobStore(DATABASE_URL, 600)
+    wait_until(lambda: jobs.status(job_id) is not None, 120, "the task to record its job")
+    jobs.close()
     wait_until(lambda: client.get(f"/v1/jobs/{job_id}").json()["progress"] > 0, 120, "progress")
     assert client.get(f"/v1/jobs/{job_id}").json()["status"] == "running"
     assert _listed(client, job_id, status="running") is not None
@@ -199,24 +211,20 @@ def _all_pages(client: httpx.Client, **params) -> list[str]:
             return seen
 
 
-def test_list_pages_through_equal_creation_times_and_prunes_expired_entries(stack):
-    # Records written as the registry writes them, all created at the same instant (a tie the cursor
-    # must break by id), plus index entries whose records expired.
-    client, store, _, _ = stack
+def test_list_pages_through_equal_creation_times(stack):
+    # Records all created at the same instant (a tie the cursor must break by id), older than the rest.
+    client, _, _, _ = stack
     ids = sorted(f"tie-{uuid.uuid4().hex[:8]}" for _ in range(5))
-    gone = [f"gone-{uuid.uuid4().hex[:8]}" for _ in range(3)]
-    score = time.time() - 3600.0  # older than every other job of this module
-    created_at = datetime.fromtimestamp(score, timezone.utc).isoformat()
+    jobs = JobStore(DATABASE_URL, 600)
     for job_id in ids:
-        store.hset(f"nonholonomic:job:{job_id}", mapping={"request": json.dumps(QUICK), "created_at": created_at,
-                                                          "cancelled": "0"})
-    store.zadd("nonholonomic:jobs", {job_id: score for job_id in ids + gone})
+        jobs.create(job_id, QUICK)
+    with jobs.session() as session, session.begin():
+        session.execute(update(JobRow).where(JobRow.id.in_(ids)).values(created=1000.0))
     try:
         everything = _all_pages(client, limit=2)  # pages end inside the tie
         assert len(everything) == len(set(everything)) and everything[-5:] == ids[::-1]  # ties: by id, each once
         assert _all_pages(client, status="queued", limit=2) == ids[::-1]
-        assert all(store.zscore("nonholonomic:jobs", job_id) is None for job_id in gone)
-        assert all(store.zscore("nonholonomic:jobs", job_id) is not None for job_id in ids)
     finally:
-        store.delete(*[f"nonholonomic:job:{job_id}" for job_id in ids])
-        store.zrem("nonholonomic:jobs", *ids, *gone)
+        with jobs.session() as session, session.begin():
+            session.execute(delete(JobRow).where(JobRow.id.in_(ids)))
+        jobs.close()

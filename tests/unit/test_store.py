@@ -32,13 +32,13 @@ def test_the_migration_builds_exactly_the_models_schema(store):
 
 def test_statuses_only_move_forward(store):
     store.create("a", REQUEST, owner="alice")
-    assert store.status("a") == "queued" and store.start("a") and store.status("a") == "running"
+    assert store.status("a") == "queued" and store.start("a", "w1") and store.status("a") == "running"
     assert store.finish("a", "succeeded", result={"x": [1.5]})
-    assert not store.cancel("a") and not store.start("a") and not store.finish("a", "failed", error={"m": "late"})
+    assert not store.cancel("a") and not store.start("a", "w1") and not store.finish("a", "failed", error={"m": "late"})
     job = store.get("a")
     assert job.status == "succeeded" and job.result == {"x": [1.5]} and job.error is None and job.attempts == 1
     store.create("b", REQUEST)
-    assert store.cancel("b") and not store.start("b") and not store.finish("b", "succeeded", result={})
+    assert store.cancel("b") and not store.start("b", "w1") and not store.finish("b", "succeeded", result={})
     assert store.get("b").status == "cancelled" and store.get("b").result is None
     with pytest.raises(ValueError):
         store.finish("b", "cancelled")
@@ -48,8 +48,8 @@ def test_unfinished_jobs_are_found_and_requeued_in_order(store):
     for job_id in ("q1", "r1", "done"):
         store.create(job_id, REQUEST)
         time.sleep(0.002)
-    store.start("r1")
-    store.start("done")
+    store.start("r1", "w1")
+    store.start("done", "w1")
     store.finish("done", "failed", error={"type": "X", "message": "y"})
     assert [j.id for j in store.unfinished()] == ["q1", "r1"]
     store.requeue("r1")
@@ -80,7 +80,7 @@ def test_expiry_deletes_only_ended_jobs_past_the_ttl(store):
     store.create("old-queued", REQUEST)
     store.create("new-done", REQUEST)
     for job_id in ("old-done", "new-done"):
-        store.start(job_id)
+        store.start(job_id, "w1")
         store.finish(job_id, "succeeded", result={})
     with store.session() as session, session.begin():
         session.execute(update(JobRow).where(JobRow.id.in_(["old-done", "old-queued"])).values(created=0.0))
