@@ -41,8 +41,11 @@ class _Progress:
         if now - self.last < PROGRESS_INTERVAL_S:
             return True
         self.last = now
-        if job_store().status(self.job_id) == "cancelled":
-            return False
+        try:
+            if job_store().status(self.job_id) == "cancelled":
+                return False
+        except OperationalError:  # the database is away: the job goes on (a cancellation waits for it)
+            pass
         self.task.update_state(state="PROGRESS", meta={"progress": fraction})
         return True
 

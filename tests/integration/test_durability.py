@@ -1,15 +1,35 @@
-"""Durable jobs in embedded mode: the API killed (SIGKILL) or stopped (SIGTERM) and started again on
-the same SQLite file loses no job and no result; jobs it had not finished run again."""
+"""Durable jobs. Embedded mode: the API killed (SIGKILL) or stopped (SIGTERM) and started again on the
+same SQLite file loses no job and no result; jobs it had not finished run again. Queue mode: Redis
+restarted empty, PostgreSQL stopped while a job runs, the API killed: no job and no result lost, work
+sent during an outage answered 503 and accepted after it."""
 
 from __future__ import annotations
 
+import os
+import shutil
 import signal
+import subprocess
+import tempfile
+import time
+import uuid
 from pathlib import Path
 
 import httpx
 import pytest
 
-from tests.support import free_port, poll_job, start_api, stop, wait_healthy, wait_until
+from tests.support import (
+    TEST_REDIS_URL,
+    drop_database,
+    free_port,
+    fresh_database_url,
+    poll_job,
+    redis_available,
+    start_api,
+    start_worker,
+    stop,
+    wait_healthy,
+    wait_until,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -62,3 +82,173 @@ def test_an_api_restart_loses_no_job_and_no_result(tmp_path, how):
         raise
     finally:
         stop(api)
+
+
+# --------------------------------------------------------------------------------------------------
+# queue mode: Redis, PostgreSQL and the API restarted under a worker
+
+
+def _redis_server(port: int, log: Path) -> subprocess.Popen:
+    """A Redis of the test's own that keeps nothing on disk (a restart loses every message)."""
+    binary = shutil.which("redis-server") or "/usr/bin/redis-server"
+    return subprocess.Popen([binary, "--port", str(port), "--bind", "127.0.0.1", "--save", "", "--appendonly", "no"],
+                            stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+def _postgres(data: Path, port: int, start: bool) -> None:
+    """Start or stop (fast) a PostgreSQL cluster of the test's own in ``data`` (created on first start)."""
+    bindir = sorted(Path("/usr/lib/postgresql").glob("*/bin/pg_ctl"))[-1].parent
+    as_postgres = ["runuser", "-u", "postgres", "--"] if os.geteuid() == 0 else []
+    if start and not (data / "PG_VERSION").exists():
+        data.mkdir()
+        if as_postgres:
+            shutil.chown(data, "postgres", "postgres")
+        subprocess.run([*as_postgres, str(bindir / "initdb"), "-D", str(data), "-A", "trust", "-U", "postgres"],
+                       check=True, stdout=subprocess.DEVNULL)
+    command = (["-l", str(data / "server.log"), "-w", "-o", f"-p {port} -k /tmp -c listen_addresses=127.0.0.1", "start"]
+               if start else ["-w", "-m", "fast", "stop"])
+    subprocess.run([*as_postgres, str(bindir / "pg_ctl"), "-D", str(data), *command], check=True,
+                   stdout=subprocess.DEVNULL)
+
+
+class QueueStack:
+    """The API and a worker on a queue of their own, with the given Redis and database."""
+
+    def __init__(self, tmp: Path, redis_url: str, database_url: str) -> None:
+        self.tmp, self.queue = tmp, f"durable-{uuid.uuid4().hex[:8]}"
+        self.env = {"REDIS_URL": redis_url, "NONHOLONOMIC_QUEUE": self.queue, "NONHOLONOMIC_DATABASE_URL": database_url,
+                    "NONHOLONOMIC_MAX_T_FINAL": "1e9"}
+        self.port = free_port()
+        self.base = f"http://127.0.0.1:{self.port}"
+        self.api: subprocess.Popen | None = None
+        self.worker: subprocess.Popen | None = None
+        self.client = httpx.Client(base_url=self.base, timeout=10)
+        self._logs = 0
+
+    def _log(self, name: str) -> Path:
+        self._logs += 1
+        return self.tmp / f"{self._logs:02d}-{name}.log"
+
+    def start_api(self) -> None:
+        self.api = start_api(self.port, self._log("api"), self.env)
+        wait_until(lambda: self.client.get("/health").status_code in (200, 503), 60, "the API")
+
+    def start_worker(self) -> None:
+        self.worker = start_worker(self.env["REDIS_URL"], self.queue, self._log("worker"),
+                                   extra_env={k: v for k, v in self.env.items() if k != "REDIS_URL"})
+        wait_healthy(self.base, timeout=180)
+
+    def stop(self) -> None:
+        for proc in (self.api, self.worker):
+            if proc is not None:
+                stop(proc)
+        self.client.close()
+
+    def logs(self) -> str:
+        return "\n".join(f"--- {p.name}\n{p.read_text()[-2500:]}" for p in sorted(self.tmp.glob("*.log")))
+
+
+def test_a_redis_restart_loses_no_job_and_no_result(tmp_path):
+    redis_port = free_port()
+    server = _redis_server(redis_port, tmp_path / "00-redis.log")
+    database = fresh_database_url()
+    stack = QueueStack(tmp_path, f"redis://127.0.0.1:{redis_port}/0", database)
+    try:
+        wait_until(lambda: redis_available(stack.env["REDIS_URL"]), 30, "the test's Redis")
+        stack.start_api()
+        stack.start_worker()
+        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=120)
+        assert done["status"] == "succeeded"
+        stop(stack.worker)  # no worker: the next job waits in Redis
+        waiting = stack.client.post("/v1/jobs", json=BODY).headers["location"]
+
+        server.kill()  # Redis gone, with every message and every progress
+        server.wait(10)
+        refused = stack.client.post("/v1/jobs", json=BODY)
+        assert refused.status_code == 503 and refused.json()["type"] == "/problems/unavailable"
+        assert stack.client.get("/health").status_code == 503
+        assert stack.client.get(f"/v1/jobs/{done['id']}").json() == done  # the result is in PostgreSQL
+        assert stack.client.get(waiting).json()["status"] == "queued"
+
+        server = _redis_server(redis_port, tmp_path / "00-redis-2.log")  # back, empty
+        wait_until(lambda: redis_available(stack.env["REDIS_URL"]), 30, "the test's Redis again")
+        accepted = stack.client.post("/v1/jobs", json=BODY)
+        assert accepted.status_code == 202
+        stack.start_worker()
+        for location in (waiting, accepted.headers["location"]):  # the lost message is sent again
+            view = poll_job(stack.client, location, timeout=60)
+            assert view["status"] == "succeeded", view["error"]
+            assert view["result"]["final_state"] == done["result"]["final_state"]
+        assert "whose message or worker was lost" in stack.logs()
+    except Exception:
+        print(stack.logs())
+        raise
+    finally:
+        stack.stop()
+        server.kill()
+        drop_database(database)
+
+
+def test_a_postgresql_restart_loses_no_job_and_no_result(tmp_path):
+    pg_port = free_port()
+    home = Path(tempfile.mkdtemp(prefix="nonholonomic-pg-", dir="/var/tmp"))  # the postgres user reaches it
+    home.chmod(0o755)
+    data = home / "data"
+    _postgres(data, pg_port, start=True)
+    database = f"postgresql+psycopg://postgres@127.0.0.1:{pg_port}/nonholonomic"
+    stack = QueueStack(tmp_path, TEST_REDIS_URL, database)
+    try:
+        stack.start_api()
+        stack.start_worker()
+        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=120)
+        assert done["status"] == "succeeded"
+        running = stack.client.post("/v1/jobs", json=LONG).headers["location"]
+        wait_until(lambda: stack.client.get(running).json()["status"] == "running", 60, "the long job to run")
+
+        _postgres(data, pg_port, start=False)  # while the job runs
+        refused = stack.client.post("/v1/jobs", json=BODY)
+        assert refused.status_code == 503 and refused.json()["type"] == "/problems/unavailable", refused.text
+        assert stack.client.get(running).status_code == 503
+        time.sleep(8)  # the long job ends meanwhile: its worker keeps its result and retries the write
+
+        _postgres(data, pg_port, start=True)
+        view = poll_job(stack.client, running, timeout=120)
+        assert view["status"] == "succeeded", view["error"]
+        assert stack.client.get(f"/v1/jobs/{done['id']}").json() == done
+        after = stack.client.post("/v1/jobs", json=BODY)
+        assert after.status_code == 202
+        assert poll_job(stack.client, after.headers["location"], timeout=60)["status"] == "succeeded"
+    except Exception:
+        print(stack.logs())
+        raise
+    finally:
+        stack.stop()
+        try:
+            _postgres(data, pg_port, start=False)
+        except subprocess.CalledProcessError:
+            pass
+        shutil.rmtree(home, ignore_errors=True)
+
+
+def test_an_api_restart_in_queue_mode_loses_nothing(tmp_path):
+    database = fresh_database_url()
+    stack = QueueStack(tmp_path, TEST_REDIS_URL, database)
+    try:
+        stack.start_api()
+        stack.start_worker()
+        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=120)
+        running = stack.client.post("/v1/jobs", json=LONG).headers["location"]
+        wait_until(lambda: stack.client.get(running).json()["status"] == "running", 60, "the long job to run")
+        stack.api.send_signal(signal.SIGKILL)
+        stack.api.wait(10)
+        stack.start_api()
+        assert stack.client.get(f"/v1/jobs/{done['id']}").json() == done
+        assert poll_job(stack.client, running, timeout=120)["status"] == "succeeded"  # the worker went on
+        listed = {i["location"] for i in stack.client.get("/v1/jobs").json()["items"]}
+        assert {f"/v1/jobs/{done['id']}", running} <= listed
+    except Exception:
+        print(stack.logs())
+        raise
+    finally:
+        stack.stop()
+        drop_database(database)

@@ -49,3 +49,14 @@ def test_api_keys_and_a_rate_limit_are_on():
     env = _compose()["services"]["api"]["environment"]
     assert env["NONHOLONOMIC_API_KEYS"].startswith("${NONHOLONOMIC_API_KEYS:?")
     assert int(env["NONHOLONOMIC_RATE_LIMIT_PER_MINUTE"]) > 0
+
+
+def test_postgresql_holds_the_jobs_and_both_processes_use_it():
+    compose = _compose()
+    postgres = compose["services"]["postgres"]
+    assert postgres["image"].startswith("postgres:") and any(v.endswith("/var/lib/postgresql/data")
+                                                             for v in postgres["volumes"])
+    url = compose["services"]["worker"]["environment"]["DATABASE_URL"]
+    assert url.startswith("postgresql+psycopg://nonholonomic:${POSTGRES_PASSWORD:?") and url.endswith("@postgres:5432/nonholonomic")
+    for name in ("api", "worker"):
+        assert compose["services"][name]["depends_on"]["postgres"]["condition"] == "service_healthy"
