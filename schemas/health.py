@@ -46,6 +46,8 @@ class Health(BaseModel):
     version: str
     mode: Literal["embedded", "queue"]
     broker: str = Field(description="'ok', 'none (embedded)' or 'unreachable: <reason>'")
+    store: Literal["ok", "unreachable", "unknown"] = Field(
+        description="the job store: PostgreSQL in queue mode, SQLite embedded ('unknown': no answer in time)")
     queue: str | None = Field(None, description="queue mode: the Celery queue the jobs go to")
     workers: EmbeddedWorkers | dict[str, QueueWorker] = Field(
         description="embedded mode: threads and warm-up; queue mode: each live worker, its queues and warm processes")

@@ -114,6 +114,15 @@ class JobStore:
     def close(self) -> None:
         self.engine.dispose()
 
+    def ping(self) -> bool:
+        """Whether the database answers ``SELECT 1``."""
+        try:
+            with self.engine.connect() as connection:
+                connection.execute(text("SELECT 1"))
+            return True
+        except Exception:
+            return False
+
     # -- writing ---------------------------------------------------------------------------------
 
     def create(self, job_id: str, request: dict[str, Any], owner: str | None = None, queue: str | None = None,

@@ -134,7 +134,8 @@ class EmbeddedBackend:
     def health(self) -> dict[str, Any]:
         warm = self._warm.is_set()
         detail = None if warm else "the integrators are being compiled (warm-up): jobs would wait for it"
-        return {"ok": warm, "mode": self.mode, "broker": "none (embedded)",
+        store = "ok" if self.store.ping() else "unreachable"
+        return {"ok": warm and store == "ok", "mode": self.mode, "broker": "none (embedded)", "store": store,
                 "workers": {"threads": self._threads, "warm": warm}, **({"detail": detail} if detail else {})}
 
     def close(self) -> None:

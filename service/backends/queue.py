@@ -166,15 +166,18 @@ class QueueBackend:
             workers, broker = {}, f"unreachable: {type(exc).__name__}"
         serving = {name: w for name, w in workers.items() if self.settings.queue in w["queues"]}
         warm = sum(w["warm_processes"] for w in serving.values())
+        store = "ok" if self.store.ping() else "unreachable"
         detail = None
         if broker != "ok":
             detail = "the broker cannot be reached: jobs cannot be queued"
+        elif store != "ok":
+            detail = "the job store (PostgreSQL) cannot be reached: jobs cannot be recorded"
         elif not serving:
             detail = f"no worker consumes the queue '{self.settings.queue}': jobs would wait"
         elif not warm:
             detail = "the workers are compiling the integrators (warm-up): jobs would wait for it"
-        return {"ok": detail is None, "mode": self.mode, "broker": broker, "queue": self.settings.queue,
-                "workers": workers, **({"detail": detail} if detail else {})}
+        return {"ok": detail is None, "mode": self.mode, "broker": broker, "store": store,
+                "queue": self.settings.queue, "workers": workers, **({"detail": detail} if detail else {})}
 
     def close(self) -> None:
         self.redis.close()

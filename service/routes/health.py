@@ -40,7 +40,8 @@ async def health(request: Request) -> JSONResponse:
             asyncio.get_running_loop().run_in_executor(_checks, backend.health), DEADLINE_S)
     except asyncio.TimeoutError:
         parts = {"ok": False, "mode": backend.mode, "broker": f"unreachable: no answer within {DEADLINE_S:g} s",
-                 "workers": {}, "detail": "the broker does not answer: jobs cannot be queued"}
+                 "store": "unknown", "workers": {},
+                 "detail": f"the broker or the job store does not answer within {DEADLINE_S:g} s"}
         if backend.mode == "queue":
             parts["queue"] = backend.settings.queue
     body = {"status": "ok" if parts["ok"] else "degraded", "api": "ok", "version": nonholonomic.__version__, **parts,

@@ -209,6 +209,9 @@ def test_a_postgresql_restart_loses_no_job_and_no_result(tmp_path):
         refused = stack.client.post("/v1/jobs", json=BODY)
         assert refused.status_code == 503 and refused.json()["type"] == "/problems/unavailable", refused.text
         assert stack.client.get(running).status_code == 503
+        health = stack.client.get("/health")
+        assert health.status_code == 503 and health.json()["store"] == "unreachable", health.text
+        assert "127.0.0.1" not in health.text and str(pg_port) not in health.text  # no host, no port
         time.sleep(8)  # the long job ends meanwhile: its worker keeps its result and retries the write
 
         _postgres(data, pg_port, start=True)
