@@ -23,6 +23,8 @@ from workers.broker_messages import request_from_args
 PROGRESS_INTERVAL_S = 0.2
 #: Seconds a worker retries writing a job's end while the database is away.
 STORE_RETRY_S = 600.0
+#: Seconds before a job that could not start (the database away) is tried again.
+START_RETRY_S = 5
 
 
 class JobTimeout(RuntimeError):
@@ -90,9 +92,13 @@ def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
     """
     job_id = self.request.id
     request, refused = request_from_args(args, kwargs)
-    store = job_store()
-    store.ensure(job_id, request, (self.request.delivery_info or {}).get("routing_key"))
-    if not store.start(job_id, _worker_key()):
+    try:
+        store = job_store()
+        store.ensure(job_id, request, (self.request.delivery_info or {}).get("routing_key"))
+        started = store.start(job_id, _worker_key())
+    except OperationalError as exc:  # the database is away: try again in a few seconds, the job unchanged
+        raise self.retry(exc=exc, countdown=START_RETRY_S, max_retries=None) from None
+    if not started:
         raise Ignore()
     self.update_state(state=states.STARTED)
     if refused is not None:
