@@ -75,9 +75,8 @@ class JobBackend(Protocol):
         may see if given (:func:`service.access.visible`), at most ``limit``,
         starting after ``cursor`` (a previous page's next cursor, None for the first page).
 
-        Returns the page and the cursor of the next one, None at the end. A page may be shorter than
-        ``limit`` (even empty) with a next cursor when a backend bounds how far it reads ahead for a
-        status filter. Raises :class:`InvalidCursor` for a cursor it did not give out.
+        Returns the page and the cursor of the next one, None at the end (pages come from the job
+        store: exact with any filter). Raises :class:`InvalidCursor` for a cursor it did not give out.
         """
 
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
