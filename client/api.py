@@ -141,7 +141,15 @@ class Client:
               poll: float, progress: Progress | None) -> dict[str, Any]:
         deadline = None if timeout is None else time.monotonic() + timeout
         while True:
-            view = get(ident)
+            try:
+                view = get(ident)
+            except ApiError as exc:  # busy or briefly away (429, 503 with Retry-After): wait as asked
+                if exc.status not in (429, 503) or exc.retry_after is None:
+                    raise
+                if deadline is not None and time.monotonic() + exc.retry_after > deadline:
+                    raise
+                time.sleep(exc.retry_after)
+                continue
             status = str(view.get("status"))
             if progress is not None:
                 progress(float(view.get("progress") or 0.0), status)

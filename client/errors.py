@@ -41,6 +41,8 @@ class ApiError(Exception):
         Each offending field as ``{"field": "system.inertia[0]", "reason": "..."}``.
     problem : dict
         The whole problem document as received (or built).
+    retry_after : float or None
+        Seconds the service asked to wait before retrying (``Retry-After`` of a 429 or 503).
 
     Examples
     --------
@@ -56,6 +58,7 @@ class ApiError(Exception):
         self.type: str = str(self.problem.get("type") or "about:blank")
         self.title: str = str(self.problem.get("title") or "Error")
         self.detail: str = str(self.problem.get("detail") or "")
+        self.retry_after: float | None = None
         raw = self.problem.get("errors") or []
         self.errors: list[dict[str, str]] = [
             {"field": str(e.get("field", "")), "reason": str(e.get("reason", ""))} if isinstance(e, dict)
@@ -95,12 +98,16 @@ class ApiError(Exception):
         except (ValueError, UnicodeDecodeError):
             body = None
         if isinstance(body, dict) and ("title" in body or "detail" in body):
-            return cls({"status": response.status_code, **body})
-        text = response.text.strip() if body is None else json.dumps(body)
-        return cls({"type": "about:blank", "title": response.reason_phrase or "HTTP error",
-                    "status": response.status_code,
-                    "detail": text[:500] or f"{response.request.method} {response.request.url} answered "
-                                             f"{response.status_code} without a body"})
+            error = cls({"status": response.status_code, **body})
+        else:
+            text = response.text.strip() if body is None else json.dumps(body)
+            error = cls({"type": "about:blank", "title": response.reason_phrase or "HTTP error",
+                         "status": response.status_code,
+                         "detail": text[:500] or f"{response.request.method} {response.request.url} answered "
+                                                  f"{response.status_code} without a body"})
+        retry = response.headers.get("retry-after", "")
+        error.retry_after = float(retry) if retry.isdigit() else None
+        return error
 
     @classmethod
     def unreachable_at(cls, url: str, exc: Exception) -> ApiError:

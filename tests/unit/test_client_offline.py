@@ -216,3 +216,25 @@ def test_the_client_sends_its_api_key_as_a_bearer_token(monkeypatch):
     with Client("http://api.test", transport=httpx.MockTransport(handler)) as api:
         api.systems()
     assert seen == ["Bearer k-1", "Bearer k-2", None]
+
+
+def test_wait_honours_retry_after_of_a_429_and_503(monkeypatch):
+    import httpx
+
+    from client import ApiError, Client
+    import client.api as api_module
+
+    answers = [
+        httpx.Response(429, json={"title": "Rate limit", "status": 429, "detail": "slow down"}, headers={"Retry-After": "2"}),
+        httpx.Response(503, json={"title": "Unavailable", "status": 503, "detail": "restart"}, headers={"Retry-After": "1"}),
+        httpx.Response(200, json={"id": "j", "status": "succeeded", "progress": 1.0, "result": {}}),
+    ]
+    slept: list[float] = []
+    monkeypatch.setattr(api_module.time, "sleep", slept.append)
+    with Client("http://api.test", transport=httpx.MockTransport(lambda request: answers.pop(0))) as api:
+        assert api.wait("j")["status"] == "succeeded"
+    assert slept == [2.0, 1.0]
+    without = httpx.MockTransport(lambda request: httpx.Response(503, json={"title": "Unavailable", "status": 503}))
+    with Client("http://api.test", transport=without) as api, pytest.raises(ApiError) as raised:
+        api.wait("j")
+    assert raised.value.status == 503 and raised.value.retry_after is None
