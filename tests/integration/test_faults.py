@@ -160,10 +160,14 @@ def test_sigterm_lets_the_running_job_finish_before_the_worker_exits(stack):
 def test_a_job_past_its_time_limit_fails_clearly_and_the_worker_stays_healthy(stack):
     stack.start_worker(**SHORT_LIMITS)
     wait_healthy(stack.base, timeout=180)
+    start = time.monotonic()
     location = stack.client.post("/v1/jobs", json=LONG).headers["location"]
     view = poll_job(stack.client, location, timeout=60)
-    assert view["status"] == "failed"
-    assert view["error"] == {"type": "JobTimeout", "message": "the job exceeded its time limit of 2 s"}
+    assert view["status"] == "failed" and time.monotonic() - start < 4 + 5  # not the job's 9 s
+    # Stopped at the soft limit (the job's next progress report), or, if none came before it on a busy
+    # machine (seen in CI), killed at the hard one; either way a clear error, and the worker goes on.
+    assert view["error"] in ({"type": "JobTimeout", "message": "the job exceeded its time limit of 2 s"},
+                             {"type": "JobTimeout", "message": "the job was killed at its hard time limit of 4 s"})
     short = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=60)
     assert short["status"] == "succeeded"
 
