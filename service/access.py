@@ -87,10 +87,6 @@ class Access:
         self.keys = load_keys(settings)
         self.limiter = RateLimiter(settings.rate_limit_per_minute) if settings.rate_limit_per_minute else None
 
-    @property
-    def enabled(self) -> bool:
-        return bool(self.keys)
-
     def owner(self, request: Request) -> str | None:
         """The caller's owner id (None when keys are off); 401 without a valid key, 429 past its rate."""
         if not self.keys:

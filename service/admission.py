@@ -81,12 +81,13 @@ class SymbolicPool:
 QUEUE_FULL_RETRY_S = 10
 
 
-def admit_work(request: Request, settings: Settings) -> None:
+def admit_work(request: Request) -> None:
     """Refuse new work (429 with ``Retry-After``) beyond the caller's key's bound on queued and running
     jobs, or beyond the bound on messages waiting in the queue."""
+    settings: Settings = request.app.state.settings
     backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
     if owner is not None:
-        active = backend.active_jobs(owner, settings.max_active_jobs_per_key)
+        active = backend.active_jobs(owner)
         if active >= settings.max_active_jobs_per_key:
             raise ProblemError(429, "Too many jobs", f"this key has {active} queued or running jobs, the most it may "
                                f"have (max_active_jobs_per_key={settings.max_active_jobs_per_key}); retry when some "

@@ -25,6 +25,9 @@ from store.models import JobRow
 ACTIVE = ("queued", "running")
 #: Statuses of a job that ended.
 ENDED = ("succeeded", "failed", "cancelled")
+#: The columns of a job read without its result (lists, resumption).
+_WITHOUT_RESULT = (JobRow.id, JobRow.status, JobRow.request, JobRow.created_at, JobRow.created, JobRow.owner,
+                   JobRow.error, JobRow.attempts)
 
 
 @dataclass
@@ -256,9 +259,8 @@ class JobStore:
     def unfinished(self) -> list[StoredJob]:
         """Jobs queued or running, oldest first (to resume after a restart)."""
         with self._session() as session:
-            rows = session.execute(select(JobRow.id, JobRow.status, JobRow.request, JobRow.created_at, JobRow.created,
-                                          JobRow.owner, JobRow.error, JobRow.attempts)
-                                   .where(JobRow.status.in_(ACTIVE)).order_by(JobRow.created, JobRow.id))
+            rows = session.execute(select(*_WITHOUT_RESULT).where(JobRow.status.in_(ACTIVE))
+                                   .order_by(JobRow.created, JobRow.id))
             return [self._stored(row, with_result=False) for row in rows]
 
     def page(self, status: str | None, limit: int, after: tuple[float, str] | None,
@@ -266,8 +268,7 @@ class JobStore:
         """Newest first by ``(created, id)``, strictly after ``after``; only ``status`` if given, only
         what ``owner`` may see if given (its own jobs and those without an owner). Returns the page
         (without results) and whether more follow."""
-        query = select(JobRow.id, JobRow.status, JobRow.request, JobRow.created_at, JobRow.created, JobRow.owner,
-                       JobRow.error, JobRow.attempts)
+        query = select(*_WITHOUT_RESULT)
         if after is not None:
             score, last = after
             query = query.where(or_(JobRow.created < score, and_(JobRow.created == score, JobRow.id < last)))

@@ -146,7 +146,7 @@ def _sweep_tasks() -> None:
     """Tasks (ensemble chunks) held by a worker that died whole: sent again (workers.redelivery)."""
     from workers.redelivery import sweep
 
-    sweep(_redis(), _send_again, skip=(SIMULATE,))
+    sweep(_redis(), _send_again)
 
 
 def _sweep_jobs() -> None:
@@ -161,10 +161,13 @@ def _sweep_jobs() -> None:
 
 @task_received.connect
 def _hold(request: Any = None, **_: Any) -> None:
-    """Note the received task under this worker's heartbeat (:mod:`workers.redelivery`)."""
+    """Note the received task under this worker's heartbeat (:mod:`workers.redelivery`); not a job's:
+    its row in the job store names its worker, and :func:`_sweep_jobs` sends it again."""
     from workers.heartbeat import worker_key
     from workers.redelivery import record_received
 
+    if request.name == SIMULATE:
+        return
     settings = get_settings()
     queue = (request.delivery_info or {}).get("routing_key") or settings.queue
     record_received(_redis(), worker_key(), request.id, request.name, request.args, request.kwargs, queue,
@@ -172,10 +175,10 @@ def _hold(request: Any = None, **_: Any) -> None:
 
 
 @task_postrun.connect
-def _release(task_id: str | None = None, **_: Any) -> None:
+def _release(sender: Any = None, task_id: str | None = None, **_: Any) -> None:
     from workers.redelivery import record_ended
 
-    if task_id:
+    if task_id and getattr(sender, "name", None) != SIMULATE:
         record_ended(_redis(), task_id)
 
 
@@ -183,7 +186,7 @@ def _release(task_id: str | None = None, **_: Any) -> None:
 def _release_revoked(request: Any = None, **_: Any) -> None:
     from workers.redelivery import record_ended
 
-    if request is not None:
+    if request is not None and request.name != SIMULATE:
         record_ended(_redis(), request.id)
 
 

@@ -34,10 +34,10 @@ def job_store() -> JobStore:
 
 
 def broker_epoch(client: redis.Redis) -> str:
-    """The broker's current epoch (created if Redis has none)."""
-    client.set(EPOCH_KEY, uuid.uuid4().hex, nx=True)
-    value = client.get(EPOCH_KEY)
-    return value.decode() if value is not None else broker_epoch(client)
+    """The broker's current epoch (created if Redis has none), in one round trip (``SET NX GET``)."""
+    fresh = uuid.uuid4().hex
+    old = client.set(EPOCH_KEY, fresh, nx=True, get=True)
+    return old.decode() if old is not None else fresh
 
 
 def resend_lost(store: JobStore, client: redis.Redis, send: Callable[[dict[str, Any], str, str], None],

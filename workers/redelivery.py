@@ -9,7 +9,9 @@ lease does it instead:
 
 - when a worker receives a task it writes ``nonholonomic:inflight:{task id}``: the task's name,
   arguments and queue, and its owner, the worker's heartbeat key (:mod:`workers.heartbeat`, refreshed
-  every 3 s, expiring after 10 s); the key is deleted when the task ends or is revoked;
+  every 3 s, expiring after 10 s); the key is deleted when the task ends or is revoked. Jobs are not
+  noted here: a job's row in the job store names its worker, and :func:`workers.job_store.resend_lost`
+  sends them again; this is for ensemble chunks;
 - every :data:`SWEEP_INTERVAL_S` each live worker sweeps these keys: a task whose owner's heartbeat
   has expired is claimed (the one sweep whose ``DEL`` removes the key) and sent again under the same
   id. A live worker so takes it within about 15 s of the owner's death.
@@ -59,10 +61,9 @@ def release_owned(client: redis.Redis, owner: str) -> None:
             client.delete(key)
 
 
-def sweep(client: redis.Redis, send: Any, skip: tuple[str, ...] = ()) -> list[str]:
-    """Send again every task whose owner is dead, but tasks named in ``skip`` (their own sweep sends
-    them: jobs, from the job store); returns their ids. ``send(name, args, kwargs, task_id, queue)``
-    publishes a task."""
+def sweep(client: redis.Redis, send: Any) -> list[str]:
+    """Send again every task whose owner is dead; returns their ids. ``send(name, args, kwargs, task_id,
+    queue)`` publishes a task."""
     keys = list(client.scan_iter(match=PREFIX + "*", count=1000))
     if not keys:
         return []
@@ -79,10 +80,6 @@ def sweep(client: redis.Redis, send: Any, skip: tuple[str, ...] = ()) -> list[st
     alive = dict(zip(owners, (bool(n) for n in _exists_each(client, owners))))
     resent = []
     for task_id, entry in held.items():
-        if entry["name"] in skip:
-            if not alive.get(entry["owner"], True):
-                client.delete(inflight_key(task_id))
-            continue
         if alive.get(entry["owner"], True) or not client.delete(inflight_key(task_id)):
             continue  # the owner lives, or another sweep claimed it
         send(entry["name"], entry["args"], entry["kwargs"], task_id, entry["queue"])

@@ -86,9 +86,8 @@ class JobBackend(Protocol):
     def cancel_ensemble(self, ensemble_id: str) -> None:
         """Stop every chunk: queued ones never start, running ones stop at their next progress report."""
 
-    def active_jobs(self, owner: str, enough: int) -> int:
-        """Queued and running jobs of ``owner``: exact when at least ``enough`` (below, it may count
-        finished jobs too, never fewer than there are)."""
+    def active_jobs(self, owner: str) -> int:
+        """Queued and running jobs of ``owner``."""
 
     def queued_messages(self) -> int:
         """Jobs and ensemble chunks waiting to start."""

@@ -125,7 +125,7 @@ class EmbeddedBackend:
         jobs, more = self.store.page(status, limit, after, owner)
         return [self._record(j) for j in jobs], encode_cursor(jobs[-1].created, jobs[-1].id) if more else None
 
-    def active_jobs(self, owner: str, enough: int) -> int:
+    def active_jobs(self, owner: str) -> int:
         return self.store.active_count(owner)
 
     def queued_messages(self) -> int:

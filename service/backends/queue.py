@@ -115,7 +115,7 @@ class QueueBackend:
         epoch = broker_epoch(self.redis)
         for raw in queued_messages(self.redis, self.settings.queue, BROKER_SCAN_LIMIT):
             parsed = parse_task_message(raw)
-            if parsed is not None and parsed[0].count(".chunk-") == 0:
+            if parsed is not None:
                 self.store.ensure(parsed[0], request_from_args(parsed[1], parsed[2])[0], self.settings.queue, epoch)
 
     def list_jobs(self, status: str | None, limit: int, cursor: str | None,
@@ -137,7 +137,7 @@ class QueueBackend:
             celery_app.control.revoke(job_id)
         return self.get(job_id)
 
-    def active_jobs(self, owner: str, enough: int) -> int:
+    def active_jobs(self, owner: str) -> int:
         return self.store.active_count(owner)
 
     def queued_messages(self) -> int:

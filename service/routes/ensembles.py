@@ -53,7 +53,7 @@ def submit_ensemble(body: EnsembleRequest, request: Request) -> JSONResponse:
     spec = body.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        admit_work(request, request.app.state.settings)
+        admit_work(request)
         ensemble_id, _ = _backend(request).submit_ensemble(spec, chunks, request.state.owner)
         location = f"/v1/ensembles/{ensemble_id}"
         accepted = EnsembleAccepted(id=ensemble_id, status="queued", location=location, members=body.members.count,

@@ -55,7 +55,7 @@ def submit_job(job: JobRequest, request: Request) -> JSONResponse:
     body = job.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        admit_work(request, request.app.state.settings)
+        admit_work(request)
         record = _backend(request).submit(body, request.state.owner)
         location = f"/v1/jobs/{record.id}"
         return JobAccepted(id=record.id, status="queued", location=location).model_dump(), {"Location": location}

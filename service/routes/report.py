@@ -43,7 +43,7 @@ def submit_report(request: Request, body: PaperReportRequest | None = Body(None)
     spec = job.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        admit_work(request, request.app.state.settings)
+        admit_work(request)
         record = request.app.state.backend.submit(spec, request.state.owner)
         location = f"/v1/jobs/{record.id}"
         return (JobAccepted(id=record.id, status="queued", location=location).model_dump(),
