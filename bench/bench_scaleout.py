@@ -92,28 +92,40 @@ def with_workers(concurrency: int, bodies: list[dict[str, Any]], logs: Path) -> 
 def in_process_chunk_seconds(body: dict[str, Any]) -> float:
     """The compute time of one chunk of ``body`` in this process (no queue), median of a few."""
     from schemas.ensembles import EnsembleRequest
-    from workers.ensembles import MemoryEnsembleStore, run_ensemble_chunk
+    from workers.ensembles import run_ensemble_chunk
 
     request = EnsembleRequest.model_validate(body)
     chunks = request.chunks()
+    store = scratch_store()
     times = []
     for rep in range(3):
-        store = MemoryEnsembleStore()
-        store.create("x", request.model_dump(mode="json"), chunks)
+        store.create(f"x{rep}", request.model_dump(mode="json"), chunks)
         start = time.perf_counter()
         for i in range(len(chunks)):
-            run_ensemble_chunk(store, "x", i, "bench")
+            run_ensemble_chunk(store, f"x{rep}", i, "bench")
         times.append((time.perf_counter() - start) / len(chunks))
     return sorted(times)[1]
+
+
+def scratch_store() -> Any:
+    """An ensemble store in a SQLite file of its own (what embedded mode uses)."""
+    from store.ensembles import EnsembleStore
+    from store.jobs import JobStore
+
+    jobs = JobStore(f"sqlite:///{tempfile.mkdtemp(prefix='bench-scaleout-')}/store.sqlite3", 3600)
+    jobs.migrate()
+    return EnsembleStore(jobs.engine, 3600)
 
 
 _BARE = """
 import sys, time
 sys.path.insert(0, {root!r})
+sys.path.insert(0, {here!r})
 from schemas.ensembles import EnsembleRequest
-from workers.ensembles import MemoryEnsembleStore, run_ensemble_chunk
+from workers.ensembles import run_ensemble_chunk
+from bench_scaleout import scratch_store
 request = EnsembleRequest.model_validate({body!r})
-store = MemoryEnsembleStore()
+store = scratch_store()
 store.create("x", request.model_dump(mode="json"), request.chunks())
 run_ensemble_chunk(store, "x", 0, "warm")
 start = time.perf_counter()
@@ -127,7 +139,7 @@ def bare_scaling(body: dict[str, Any]) -> tuple[float, float]:
     """Seconds for one plain process to run the chunks of ``body``, and for each of two at once (the slower)."""
     import subprocess
 
-    code = _BARE.format(root=str(ROOT), body=body)
+    code = _BARE.format(root=str(ROOT), here=str(Path(__file__).parent), body=body)
     one = float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout)
     procs = [subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True) for _ in range(2)]
     two = max(float(p.communicate()[0]) for p in procs)

@@ -1,6 +1,6 @@
 """Reading an ensemble's record: its view (status, progress, summary), pages of members, and every
-member's section points as rows for the exports. The same for both modes (any
-:class:`workers.ensembles.EnsembleStore`)."""
+member's section points as rows for the exports. The same for both modes
+(:class:`store.ensembles.EnsembleStore`)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import numpy as np
 from nonholonomic.analysis.ensemble import summarize
 from nonholonomic.systems import get_system
 from schemas.results import system_units
-from workers.ensembles import EnsembleStore
+from store.ensembles import EnsembleStore
 
 
 def view(ensemble_id: str, record: dict[str, Any]) -> dict[str, Any]:

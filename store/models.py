@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import JSON, Float, Index, Integer, String
+from sqlalchemy import JSON, Boolean, Float, Index, Integer, String
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
@@ -46,3 +46,43 @@ class JobRow(Base):
         Index("ix_jobs_owner_status", "owner", "status"),
         Index("ix_jobs_status", "status"),
     )
+
+
+class EnsembleRow(Base):
+    """An ensemble: its request, its chunks' member ranges, whether it was cancelled, and how its chunks
+    were sent (the queue and the broker's epoch, as for a job)."""
+
+    __tablename__ = "ensembles"
+
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    owner: Mapped[str | None] = mapped_column(String(128), nullable=True)
+    request: Mapped[dict[str, Any]] = mapped_column(Document)
+    #: ``[[start, stop], ...]``: the members of each chunk.
+    chunks: Mapped[list[list[int]]] = mapped_column(Document)
+    created: Mapped[float] = mapped_column(Float)
+    created_at: Mapped[str] = mapped_column(String(40))
+    cancelled: Mapped[bool] = mapped_column(Boolean, default=False)
+    queue: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    broker_epoch: Mapped[str | None] = mapped_column(String(64), nullable=True)
+
+    __table_args__ = (Index("ix_ensembles_created", "created"),)
+
+
+class EnsembleChunkRow(Base):
+    """One chunk of an ensemble: its progress while it runs, then its members' results and digests,
+    written in one statement with ``done`` (a chunk run twice is counted once)."""
+
+    __tablename__ = "ensemble_chunks"
+
+    ensemble_id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    chunk: Mapped[int] = mapped_column(Integer, primary_key=True)
+    done: Mapped[bool] = mapped_column(Boolean, default=False)
+    members_done: Mapped[int] = mapped_column(Integer, default=0)
+    #: How many times a worker started it (more than once: redelivered).
+    starts: Mapped[int] = mapped_column(Integer, default=0)
+    #: The worker that finished it.
+    worker: Mapped[str | None] = mapped_column(String(200), nullable=True)
+    members: Mapped[list[dict[str, Any]] | None] = mapped_column(Document, nullable=True)
+    digests: Mapped[list[dict[str, Any]] | None] = mapped_column(Document, nullable=True)
+
+    __table_args__ = (Index("ix_ensemble_chunks_pending", "ensemble_id", "done"),)

@@ -129,7 +129,7 @@ def _announce(sender: Any = None, **_: Any) -> None:
     _open_job_store()
     queues = sorted(q.name for q in sender.task_consumer.queues)
     _beat(worker_key(), json.dumps({"name": sender.hostname, "queues": queues}))
-    _sweepers.append(Sweeper([_sweep_tasks, _sweep_jobs]).start())
+    _sweepers.append(Sweeper([_sweep_tasks, _sweep_jobs, _sweep_ensembles]).start())
     if "prefork" not in type(sender.pool).__module__:  # solo or threads: jobs run in this process
         if get_settings().warm_up:
             from workers.jobs import warm_up
@@ -157,6 +157,16 @@ def _sweep_jobs() -> None:
     resend_lost(job_store(), client,
                 lambda request, job_id, queue: _send_again(SIMULATE, [request], {}, job_id, queue),
                 lambda worker: bool(client.exists(worker)))
+
+
+def _sweep_ensembles() -> None:
+    """Pending chunks of ensembles whose messages the broker lost: sent again (workers.job_store)."""
+    from workers.ensembles import ENSEMBLE_CHUNK, chunk_task_id
+    from workers.job_store import ensemble_store, resend_lost_chunks
+
+    resend_lost_chunks(ensemble_store(), _redis(),
+                       lambda ensemble_id, chunk, queue: _send_again(ENSEMBLE_CHUNK, [ensemble_id, chunk], {},
+                                                                    chunk_task_id(ensemble_id, chunk), queue))
 
 
 @task_received.connect

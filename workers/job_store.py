@@ -1,27 +1,33 @@
-"""The job store of the workers and the API in queue mode, and the broker's epoch.
+"""The job and ensemble stores of the workers and the API in queue mode, and the broker's epoch.
 
 The broker's *epoch* is a random id kept in Redis (``nonholonomic:broker-epoch``), created when
 missing. Every job row records the epoch it was sent in. A Redis that lost its data (restarted
 without persistence) comes back without the key: a new epoch begins, and every job still queued
-in an older epoch lost its message, so it is sent again (:func:`resend_lost`).
+in an older epoch lost its message, so it is sent again (:func:`resend_lost`), and so are the
+pending chunks of every ensemble sent in an older epoch (:func:`resend_lost_chunks`).
 """
 
 from __future__ import annotations
 
 import logging
+import time
 import uuid
 from collections.abc import Callable
 from functools import lru_cache
 from typing import Any
 
 import redis
+from sqlalchemy.exc import OperationalError
 
 from schemas.settings import get_settings
+from store.ensembles import EnsembleStore
 from store.jobs import JobStore
 
 log = logging.getLogger(__name__)
 
 EPOCH_KEY = "nonholonomic:broker-epoch"
+#: Seconds a worker retries writing a result while the database is away.
+STORE_RETRY_S = 600.0
 
 
 @lru_cache(maxsize=1)
@@ -31,6 +37,28 @@ def job_store() -> JobStore:
     store = JobStore(settings.store_url, settings.job_ttl_s)
     store.migrate()
     return store
+
+
+@lru_cache(maxsize=1)
+def ensemble_store() -> EnsembleStore:
+    """The ensembles of ``DATABASE_URL``, on the job store's engine."""
+    return EnsembleStore(job_store().engine, get_settings().job_ttl_s)
+
+
+def write_until_stored(write: Callable[[], Any], limit_s: float = STORE_RETRY_S) -> None:
+    """Call ``write`` until the database takes it, for up to ``limit_s`` seconds (then raise): a result
+    computed is not thrown away because the database restarts."""
+    deadline = time.monotonic() + limit_s
+    delay = 0.5
+    while True:
+        try:
+            write()
+            return
+        except OperationalError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(delay)
+            delay = min(2 * delay, 10.0)
 
 
 def broker_epoch(client: redis.Redis) -> str:
@@ -61,4 +89,23 @@ def resend_lost(store: JobStore, client: redis.Redis, send: Callable[[dict[str, 
                     resent.append(job_id)
     if resent:
         log.warning("sent again %d job(s) whose message or worker was lost: %s", len(resent), ", ".join(resent[:10]))
+    return resent
+
+
+def resend_lost_chunks(store: EnsembleStore, client: redis.Redis,
+                       send: Callable[[str, int, str], None]) -> list[str]:
+    """Send again the pending chunks of every ensemble whose chunks were sent in an older broker epoch
+    (the broker lost those messages); ``send(ensemble_id, chunk, queue)`` publishes one. Each ensemble
+    is claimed first, so that one sweep sends it. Returns the ensembles' ids."""
+    epoch = broker_epoch(client)
+    default_queue = get_settings().queue
+    resent = []
+    for ensemble_id, queue, old in store.sent_before(epoch):
+        if store.resend_claim(ensemble_id, old, epoch):
+            for chunk in store.pending_chunks(ensemble_id):
+                send(ensemble_id, chunk, queue or default_queue)
+            resent.append(ensemble_id)
+    if resent:
+        log.warning("sent again the pending chunks of %d ensemble(s) whose messages were lost: %s", len(resent),
+                    ", ".join(resent[:10]))
     return resent

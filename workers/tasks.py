@@ -3,26 +3,22 @@
 from __future__ import annotations
 
 import time
-from functools import lru_cache
 from typing import Any
 
-import redis
 from celery import Task, states
 from celery.exceptions import Ignore, SoftTimeLimitExceeded, TimeLimitExceeded
 from sqlalchemy.exc import OperationalError
 
 from nonholonomic.integration import IntegrationCancelled
 from schemas.settings import get_settings
-from workers.celery_app import DEFAULT_REDIS_URL, app
-from workers.ensembles import RedisEnsembleStore, run_ensemble_chunk
+from workers.celery_app import app
+from workers.ensembles import ENSEMBLE_CHUNK, run_ensemble_chunk
 from workers.jobs import InvalidJob, run_job
-from workers.job_store import job_store
+from workers.job_store import ensemble_store, job_store, write_until_stored
 from workers.broker_messages import request_from_args
 
 #: Seconds between progress updates (and cancellation checks) of a running job.
 PROGRESS_INTERVAL_S = 0.2
-#: Seconds a worker retries writing a job's end while the database is away.
-STORE_RETRY_S = 600.0
 #: Seconds before a job that could not start (the database away) is tried again.
 START_RETRY_S = 5
 
@@ -54,19 +50,8 @@ class _Progress:
 
 def _record_end(job_id: str, status: str, result: dict[str, Any] | None = None,
                 error: dict[str, str] | None = None) -> None:
-    """Write the job's end to the store, retrying while the database is away (up to
-    :data:`STORE_RETRY_S`): a result computed is not thrown away because PostgreSQL restarts."""
-    deadline = time.monotonic() + STORE_RETRY_S
-    delay = 0.5
-    while True:
-        try:
-            job_store().finish(job_id, status, result=result, error=error)
-            return
-        except OperationalError:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(delay)
-            delay = min(2 * delay, 10.0)
+    """Write the job's end to the store, retrying while the database is away."""
+    write_until_stored(lambda: job_store().finish(job_id, status, result=result, error=error))
 
 
 class _JobTask(Task):
@@ -129,14 +114,12 @@ def _in_pool_process() -> bool:
     return current_process().name != "MainProcess"
 
 
-@lru_cache(maxsize=1)
-def _ensemble_store() -> RedisEnsembleStore:
-    settings = get_settings()
-    return RedisEnsembleStore(redis.Redis.from_url(settings.redis_url or DEFAULT_REDIS_URL), settings.job_ttl_s)
-
-
-@app.task(bind=True, name="nonholonomic.ensemble_chunk", ignore_result=True)
+@app.task(bind=True, name=ENSEMBLE_CHUNK, ignore_result=True)
 def ensemble_chunk(self: Task, ensemble_id: str, chunk: int) -> str:
     """Run one chunk of an ensemble (:func:`workers.ensembles.run_ensemble_chunk`); the results go to
-    the ensemble's record, the task's own result is only what happened (``done``, ``cancelled`` ...)."""
-    return run_ensemble_chunk(_ensemble_store(), ensemble_id, chunk, self.request.hostname or "worker")
+    the ensemble's record, the task's own result is only what happened (``done``, ``cancelled`` ...).
+    A database that is away when the chunk starts: tried again in a few seconds."""
+    try:
+        return run_ensemble_chunk(ensemble_store(), ensemble_id, chunk, self.request.hostname or "worker")
+    except OperationalError as exc:
+        raise self.retry(exc=exc, countdown=START_RETRY_S, max_retries=None) from None

@@ -9,7 +9,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from workers.ensembles import EnsembleStore
+from store.ensembles import EnsembleStore
 
 
 @dataclass

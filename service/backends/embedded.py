@@ -12,7 +12,8 @@ from nonholonomic.integration import IntegrationCancelled
 from schemas.settings import Settings
 from service.backends.base import JobRecord, decode_cursor, encode_cursor
 from store.jobs import JobStore, StoredJob
-from workers.ensembles import MemoryEnsembleStore, run_ensemble_chunk
+from store.ensembles import EnsembleStore
+from workers.ensembles import run_ensemble_chunk
 from workers.jobs import run_job, warm_up
 
 
@@ -20,8 +21,8 @@ class EmbeddedBackend:
     """Jobs recorded in a SQLite file (:mod:`store`), run by ``settings.embedded_workers`` threads.
 
     A restart loses nothing: jobs that were queued or running when the API stopped are run again
-    when it starts. Finished jobs are deleted ``settings.job_ttl_s`` after they were submitted.
-    Ensembles live in memory (they do not outlive the process).
+    when it starts, and so are the chunks of ensembles not done yet. Finished jobs and ensembles are
+    deleted ``settings.job_ttl_s`` after they were submitted.
     """
 
     mode = "embedded"
@@ -34,8 +35,8 @@ class EmbeddedBackend:
         self._lock = threading.Lock()
         self._threads = settings.embedded_workers
         self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="nonholonomic-job")
-        self.ensembles = MemoryEnsembleStore()
-        self._ensemble_ids: list[str] = []
+        self.ensembles = EnsembleStore(self.store.engine, settings.job_ttl_s)
+        self._closing = threading.Event()
         self._warm = threading.Event()
         if settings.warm_up:  # in its own thread, so the first jobs need not wait behind it
             threading.Thread(target=self._warm_up, daemon=True, name="nonholonomic-warm-up").start()
@@ -45,6 +46,10 @@ class EmbeddedBackend:
         for job_id in self.resumed:  # interrupted by the last stop: run again
             self.store.requeue(job_id)
             self._enqueue(job_id)
+        self.resumed_ensembles = self.ensembles.unfinished()
+        for ensemble_id in self.resumed_ensembles:
+            for chunk in self.ensembles.pending_chunks(ensemble_id):
+                self._enqueue_chunk(ensemble_id, chunk)
 
     def _warm_up(self) -> None:
         try:
@@ -94,10 +99,12 @@ class EmbeddedBackend:
                         owner: str | None = None) -> tuple[str, str]:
         ensemble_id = str(uuid.uuid4())
         created_at = self.ensembles.create(ensemble_id, request, chunks, owner)
-        self._ensemble_ids.append(ensemble_id)
         for chunk in range(len(chunks)):
-            self._pool.submit(run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded")
+            self._enqueue_chunk(ensemble_id, chunk)
         return ensemble_id, created_at
+
+    def _enqueue_chunk(self, ensemble_id: str, chunk: int) -> None:
+        self._pool.submit(run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded", self._closing.is_set)
 
     def cancel_ensemble(self, ensemble_id: str) -> None:
         self.ensembles.cancel(ensemble_id)
@@ -140,10 +147,9 @@ class EmbeddedBackend:
 
     def close(self) -> None:
         """Stop every job and ensemble chunk at its next progress report, drop what is queued (the jobs
-        stay queued or running in the store: the next start runs them again)."""
+        stay queued or running in the store, the chunks pending: the next start runs them again)."""
+        self._closing.set()
         for event in list(self._cancel.values()):
             event.set()
-        for ensemble_id in self._ensemble_ids:
-            self.ensembles.cancel(ensemble_id)
         self._pool.shutdown(wait=False, cancel_futures=True)
         self.store.close()

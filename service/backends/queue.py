@@ -1,5 +1,5 @@
 """Queue mode: jobs are recorded in the job store (PostgreSQL) and go to Celery workers through Redis,
-which is only the broker (and carries progress); ensembles' records live in Redis.
+which is only the broker (and carries jobs' progress); ensembles live in the same database.
 
 Jobs sent straight to the queue by a job-queue client (``send_task("nonholonomic.simulate", ...)``)
 are jobs like any other: the task records its job when it starts, and this backend records one
@@ -21,7 +21,8 @@ from schemas.settings import Settings
 from service.backends.base import JobRecord, decode_cursor, encode_cursor
 from store.jobs import JobStore, StoredJob
 from workers.celery_app import app as celery_app
-from workers.ensembles import RedisEnsembleStore
+from store.ensembles import EnsembleStore
+from workers.ensembles import chunk_task_id
 from workers.heartbeat import census
 from workers.job_store import broker_epoch
 from workers.broker_messages import (
@@ -40,10 +41,6 @@ BROKER_SCAN_LIMIT = 1000
 HEALTH_TIMEOUT_S = 0.05
 
 
-def _chunk_task_id(ensemble_id: str, chunk: int) -> str:
-    return f"{ensemble_id}.chunk-{chunk}"
-
-
 class QueueBackend:
     """Jobs recorded in the job store (PostgreSQL, :mod:`store`) and sent to the Celery queue
     ``settings.queue``; workers write their ends and results to the store, progress through Celery."""
@@ -55,7 +52,7 @@ class QueueBackend:
         self.redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=5)
         self.store = JobStore(settings.store_url, settings.job_ttl_s)
         self.store.migrate()
-        self.ensembles = RedisEnsembleStore(self.redis, settings.job_ttl_s)
+        self.ensembles = EnsembleStore(self.store.engine, settings.job_ttl_s)
         # /health answers within its deadline even when Redis does not
         self._health_redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=HEALTH_TIMEOUT_S,
                                                   socket_connect_timeout=HEALTH_TIMEOUT_S)
@@ -145,17 +142,25 @@ class QueueBackend:
 
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
                         owner: str | None = None) -> tuple[str, str]:
+        """Record the ensemble, then send its chunks; if the broker refuses, the record is removed and
+        the error raised (a 503: nothing was accepted)."""
         ensemble_id = str(uuid.uuid4())
-        created_at = self.ensembles.create(ensemble_id, request, chunks, owner)
-        group(ensemble_chunk.si(ensemble_id, i).set(task_id=_chunk_task_id(ensemble_id, i), queue=self.settings.queue)
-              for i in range(len(chunks))).apply_async()
+        created_at = self.ensembles.create(ensemble_id, request, chunks, owner, self.settings.queue,
+                                           broker_epoch(self.redis))
+        try:
+            group(ensemble_chunk.si(ensemble_id, i).set(task_id=chunk_task_id(ensemble_id, i),
+                                                        queue=self.settings.queue)
+                  for i in range(len(chunks))).apply_async(retry=False)
+        except Exception:
+            self.ensembles.delete(ensemble_id)
+            raise
         return ensemble_id, created_at
 
     def cancel_ensemble(self, ensemble_id: str) -> None:
         record = self.ensembles.record(ensemble_id)
         self.ensembles.cancel(ensemble_id)  # running chunks see it within their progress interval
         if record is not None:  # queued chunks are dropped by the worker that receives them
-            celery_app.control.revoke([_chunk_task_id(ensemble_id, i) for i in range(len(record["chunks"]))
+            celery_app.control.revoke([chunk_task_id(ensemble_id, i) for i in range(len(record["chunks"]))
                                        if i not in record["done"]])
 
     def health(self) -> dict[str, Any]:

@@ -185,8 +185,8 @@ def test_cancel_stops_every_chunk(client):
 
 
 def test_closing_the_app_stops_a_running_ensemble(monkeypatch):
-    """Embedded mode: shutting the API down cancels running chunks (they stop at their next progress
-    report) instead of computing on after the server is gone."""
+    """Embedded mode: shutting the API down stops running chunks (at their next progress report) instead
+    of computing on after the server is gone; they stay pending, for the next start to run again."""
     import threading
 
     from fastapi.testclient import TestClient
@@ -207,7 +207,8 @@ def test_closing_the_app_stops_a_running_ensemble(monkeypatch):
         backend = c.app.state.backend
         ensemble_id = location.rsplit("/", 1)[1]
     get_settings.cache_clear()
-    assert backend.ensembles.record(ensemble_id)["cancelled"]
+    record = backend.ensembles.record(ensemble_id)  # stopped, not cancelled: pending for the next start
+    assert not record["cancelled"] and record["done"] == set() and record["starts"] == {0: 1}
     deadline = time.monotonic() + 10
     while any(t.name.startswith("nonholonomic-job") for t in threading.enumerate()) and time.monotonic() < deadline:
         time.sleep(0.05)

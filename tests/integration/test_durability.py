@@ -1,5 +1,6 @@
-"""Durable jobs. Embedded mode: the API killed (SIGKILL) or stopped (SIGTERM) and started again on the
-same SQLite file loses no job and no result; jobs it had not finished run again. Queue mode: Redis
+"""Durable jobs and ensembles. Embedded mode: the API killed (SIGKILL) or stopped (SIGTERM) and started
+again on the same SQLite file loses no job, no ensemble and no result; the jobs and ensemble chunks it
+had not finished run again. Queue mode: Redis
 restarted empty, PostgreSQL stopped while a job runs, the API killed: no job and no result lost, work
 sent during an outage answered 503 and accepted after it."""
 
@@ -37,6 +38,26 @@ BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.
         "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 11}
 #: About 5 s on one core: running (and one more queued behind it) when the API is stopped.
 LONG = {**BODY, "t_final": 2e6}
+#: Four members in two chunks.
+ENSEMBLE = {"system": BODY["system"], "t_final": 20.0, "chunk_size": 2,
+            "members": {"sample": {"count": 4, "seed": 3, "level": {"energy": 1.0}}}}
+
+
+def _without_times(value):
+    if isinstance(value, dict):
+        return {k: _without_times(v) for k, v in value.items() if k != "wall_time_s"}
+    return [_without_times(v) for v in value] if isinstance(value, list) else value
+
+
+def _members(client: httpx.Client, location: str) -> list[dict]:
+    """The members' results (without their wall times)."""
+    return _without_times(client.get(f"{location}/members", params={"limit": 100}).json()["members"])
+
+
+def _same_ensemble(client: httpx.Client, location: str, before: dict, members: list[dict]) -> None:
+    """The ensemble as it was (its record, summary and members bit for bit)."""
+    assert client.get(location).json() == before
+    assert _members(client, location) == members
 
 
 def _api(port: int, data_dir: Path, log: Path):
@@ -54,12 +75,18 @@ def test_an_api_restart_loses_no_job_and_no_result(tmp_path, how):
         with httpx.Client(base_url=base, timeout=10) as client:
             done = poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"], timeout=60)
             assert done["status"] == "succeeded"
+            finished = client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]
+            finished_view = poll_job(client, finished, timeout=60)
+            assert finished_view["status"] == "succeeded"
+            finished_members = _members(client, finished)
             running = client.post("/v1/jobs", json=LONG).headers["location"]
             queued = client.post("/v1/jobs", json=LONG).headers["location"]  # one thread: waits behind it
             cancelled = client.post("/v1/jobs", json=LONG).headers["location"]
             assert client.delete(cancelled).status_code == 202
+            pending = client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]  # waits too
             wait_until(lambda: client.get(running).json()["status"] == "running", 30, "the long job to run")
             assert client.get(queued).json()["status"] == "queued"
+            assert client.get(pending).json()["status"] == "queued"
         api.send_signal(how)
         api.wait(30)
     finally:
@@ -77,6 +104,10 @@ def test_an_api_restart_loses_no_job_and_no_result(tmp_path, how):
             assert client.get(cancelled).json()["status"] == "cancelled"
             listed = {item["location"] for item in client.get("/v1/jobs").json()["items"]}
             assert {f"/v1/jobs/{done['id']}", running, queued, cancelled} <= listed
+            _same_ensemble(client, finished, finished_view, finished_members)
+            resumed = poll_job(client, pending, timeout=120)  # its chunks run after the restart
+            assert resumed["status"] == "succeeded" and resumed["members_done"] == 4
+            assert _members(client, pending) == finished_members  # the same members, the same numbers
     except Exception:
         print((tmp_path / "api-1.log").read_text()[-3000:], (tmp_path / "api-2.log").read_text()[-3000:])
         raise
@@ -159,8 +190,13 @@ def test_a_redis_restart_loses_no_job_and_no_result(tmp_path):
         stack.start_worker()
         done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=120)
         assert done["status"] == "succeeded"
-        stop(stack.worker)  # no worker: the next job waits in Redis
+        finished = stack.client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]
+        finished_view = poll_job(stack.client, finished, timeout=120)
+        assert finished_view["status"] == "succeeded"
+        finished_members = _members(stack.client, finished)
+        stop(stack.worker)  # no worker: the next job and ensemble wait in Redis
         waiting = stack.client.post("/v1/jobs", json=BODY).headers["location"]
+        waiting_ensemble = stack.client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]
 
         server.kill()  # Redis gone, with every message and every progress
         server.wait(10)
@@ -169,6 +205,8 @@ def test_a_redis_restart_loses_no_job_and_no_result(tmp_path):
         assert stack.client.get("/health").status_code == 503
         assert stack.client.get(f"/v1/jobs/{done['id']}").json() == done  # the result is in PostgreSQL
         assert stack.client.get(waiting).json()["status"] == "queued"
+        _same_ensemble(stack.client, finished, finished_view, finished_members)  # and the ensemble's
+        assert stack.client.post("/v1/ensembles", json=ENSEMBLE).status_code == 503
 
         server = _redis_server(redis_port, tmp_path / "00-redis-2.log")  # back, empty
         wait_until(lambda: redis_available(stack.env["REDIS_URL"]), 30, "the test's Redis again")
@@ -179,7 +217,10 @@ def test_a_redis_restart_loses_no_job_and_no_result(tmp_path):
             view = poll_job(stack.client, location, timeout=60)
             assert view["status"] == "succeeded", view["error"]
             assert view["result"]["final_state"] == done["result"]["final_state"]
+        again = poll_job(stack.client, waiting_ensemble, timeout=60)  # its lost chunks are sent again
+        assert again["status"] == "succeeded" and _members(stack.client, waiting_ensemble) == finished_members
         assert "whose message or worker was lost" in stack.logs()
+        assert "pending chunks of 1 ensemble(s) whose messages were lost" in stack.logs()
     except Exception:
         print(stack.logs())
         raise
@@ -205,6 +246,7 @@ def test_a_postgresql_restart_loses_no_job_and_no_result(tmp_path):
         running = stack.client.post("/v1/jobs", json=LONG).headers["location"]
         wait_until(lambda: stack.client.get(running).json()["status"] == "running", 60, "the long job to run")
         behind = stack.client.post("/v1/jobs", json=BODY).headers["location"]  # one process: it waits
+        ensemble = stack.client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]  # and its chunks
 
         _postgres(data, pg_port, start=False)  # while the job runs; the next one starts during the outage
         refused = stack.client.post("/v1/jobs", json=BODY)
@@ -220,6 +262,9 @@ def test_a_postgresql_restart_loses_no_job_and_no_result(tmp_path):
             view = poll_job(stack.client, location, timeout=120)
             assert view["status"] == "succeeded", view["error"]
         assert stack.client.get(f"/v1/jobs/{done['id']}").json() == done
+        view = poll_job(stack.client, ensemble, timeout=120)  # chunks that met the outage tried again
+        assert view["status"] == "succeeded" and view["members_done"] == 4
+        assert all(m["status"] == "succeeded" for m in _members(stack.client, ensemble))
         after = stack.client.post("/v1/jobs", json=BODY)
         assert after.status_code == 202
         assert poll_job(stack.client, after.headers["location"], timeout=60)["status"] == "succeeded"
@@ -243,12 +288,14 @@ def test_an_api_restart_in_queue_mode_loses_nothing(tmp_path):
         stack.start_worker()
         done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=120)
         running = stack.client.post("/v1/jobs", json=LONG).headers["location"]
+        ensemble = stack.client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]
         wait_until(lambda: stack.client.get(running).json()["status"] == "running", 60, "the long job to run")
         stack.api.send_signal(signal.SIGKILL)
         stack.api.wait(10)
         stack.start_api()
         assert stack.client.get(f"/v1/jobs/{done['id']}").json() == done
         assert poll_job(stack.client, running, timeout=120)["status"] == "succeeded"  # the worker went on
+        assert poll_job(stack.client, ensemble, timeout=120)["status"] == "succeeded"
         listed = {i["location"] for i in stack.client.get("/v1/jobs").json()["items"]}
         assert {f"/v1/jobs/{done['id']}", running} <= listed
     except Exception:

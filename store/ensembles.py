@@ -1,0 +1,180 @@
+"""The ensemble store: ensembles' records, their chunks' progress and their members' results in the
+job store's database (SQLAlchemy; the schema is migrated with the jobs', :meth:`store.jobs.JobStore.migrate`).
+
+An ensemble counts its finished chunks by their ``done`` flag, and a chunk's members are written
+with that flag in one statement, so a chunk that runs twice (redelivered after its worker died, or
+sent again after the broker lost its messages) replaces its own results with the same numbers and is
+counted once. Ensembles are deleted ``ttl_s`` after their creation once none of their chunks is
+pending (or they were cancelled).
+"""
+
+from __future__ import annotations
+
+import threading
+from datetime import datetime, timezone
+from typing import Any
+
+from sqlalchemy import Engine, delete, exists, insert, or_, select, update
+from sqlalchemy.orm import sessionmaker
+
+from store.models import EnsembleChunkRow, EnsembleRow
+
+_PENDING = exists().where(EnsembleChunkRow.ensemble_id == EnsembleRow.id, EnsembleChunkRow.done.is_(False))
+
+
+class EnsembleStore:
+    """Ensembles in the database of ``engine`` (shared with the :class:`store.jobs.JobStore`)."""
+
+    def __init__(self, engine: Engine, ttl_s: int) -> None:
+        self.engine, self.ttl_s = engine, ttl_s
+        self._session = sessionmaker(engine, expire_on_commit=False)
+        self._cleaned = 0.0
+        self._cleaning = threading.Lock()
+
+    # -- writing ---------------------------------------------------------------------------------
+
+    def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]],
+               owner: str | None = None, queue: str | None = None, broker_epoch: str | None = None) -> str:
+        """Record an ensemble and its chunks, none started; returns its ``created_at`` (ISO 8601, UTC)."""
+        now = datetime.now(timezone.utc)
+        with self._session.begin() as session:
+            session.add(EnsembleRow(id=ensemble_id, owner=owner, request=request,
+                                    chunks=[list(c) for c in chunks], created=now.timestamp(),
+                                    created_at=now.isoformat(), cancelled=False, queue=queue,
+                                    broker_epoch=broker_epoch))
+            session.flush()
+            session.execute(insert(EnsembleChunkRow), [
+                {"ensemble_id": ensemble_id, "chunk": i, "done": False, "members_done": 0, "starts": 0}
+                for i in range(len(chunks))])
+        self._clean_now_and_then(now.timestamp())
+        return now.isoformat()
+
+    def delete(self, ensemble_id: str) -> None:
+        """Forget an ensemble whose chunks could not be sent (the broker refused them)."""
+        with self._session.begin() as session:
+            session.execute(delete(EnsembleChunkRow).where(EnsembleChunkRow.ensemble_id == ensemble_id))
+            session.execute(delete(EnsembleRow).where(EnsembleRow.id == ensemble_id))
+
+    def cancel(self, ensemble_id: str) -> None:
+        with self._session.begin() as session:
+            session.execute(update(EnsembleRow).where(EnsembleRow.id == ensemble_id).values(cancelled=True))
+
+    def mark_started(self, ensemble_id: str, chunk: int) -> None:
+        self._update_chunk(ensemble_id, chunk, starts=EnsembleChunkRow.starts + 1)
+
+    def set_progress(self, ensemble_id: str, chunk: int, members_done: int) -> None:
+        """The members a running chunk has finished (not for a chunk already done)."""
+        with self._session.begin() as session:
+            session.execute(update(EnsembleChunkRow)
+                            .where(EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk,
+                                   EnsembleChunkRow.done.is_(False))
+                            .values(members_done=members_done))
+
+    def store_chunk(self, ensemble_id: str, chunk: int, members: list[dict[str, Any]],
+                    digests: list[dict[str, Any]], worker: str) -> None:
+        """A chunk's members' results and digests, and ``done``, in one statement."""
+        self._update_chunk(ensemble_id, chunk, members=members, digests=digests, worker=worker, done=True,
+                           members_done=len(members))
+
+    def _update_chunk(self, ensemble_id: str, chunk: int, **values: Any) -> None:
+        with self._session.begin() as session:
+            session.execute(update(EnsembleChunkRow)
+                            .where(EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk)
+                            .values(**values))
+
+    def resend_claim(self, ensemble_id: str, old_epoch: str | None, broker_epoch: str) -> bool:
+        """Claim an ensemble sent in ``old_epoch`` for sending its pending chunks again in
+        ``broker_epoch``; True for the one caller that claims it."""
+        epoch = EnsembleRow.broker_epoch.is_(None) if old_epoch is None else EnsembleRow.broker_epoch == old_epoch
+        with self._session.begin() as session:
+            done = session.execute(update(EnsembleRow).where(EnsembleRow.id == ensemble_id, epoch)
+                                   .values(broker_epoch=broker_epoch))
+            return done.rowcount == 1  # type: ignore[attr-defined]
+
+    def delete_expired(self) -> int:
+        """Delete ensembles created more than ``ttl_s`` ago that ended (no chunk pending, or
+        cancelled); returns how many."""
+        horizon = datetime.now(timezone.utc).timestamp() - self.ttl_s
+        with self._session.begin() as session:
+            ids = list(session.scalars(select(EnsembleRow.id).where(
+                EnsembleRow.created < horizon, or_(EnsembleRow.cancelled.is_(True), ~_PENDING))))
+            if ids:
+                session.execute(delete(EnsembleChunkRow).where(EnsembleChunkRow.ensemble_id.in_(ids)))
+                session.execute(delete(EnsembleRow).where(EnsembleRow.id.in_(ids)))
+            return len(ids)
+
+    def _clean_now_and_then(self, now: float, every_s: float = 60.0) -> None:
+        if now - self._cleaned < every_s or not self._cleaning.acquire(blocking=False):
+            return
+        try:
+            self._cleaned = now
+            self.delete_expired()
+        finally:
+            self._cleaning.release()
+
+    # -- reading ---------------------------------------------------------------------------------
+
+    def record(self, ensemble_id: str) -> dict[str, Any] | None:
+        """The ensemble's request, chunks, owner, ``cancelled``, and by chunk: ``done`` (a set),
+        ``progress`` (members done, of chunks started and not done), ``digests``, ``workers`` and ``starts``; None if unknown."""
+        with self._session() as session:
+            row = session.get(EnsembleRow, ensemble_id)
+            if row is None:
+                return None
+            chunks = session.execute(select(EnsembleChunkRow.chunk, EnsembleChunkRow.done,
+                                            EnsembleChunkRow.members_done, EnsembleChunkRow.starts,
+                                            EnsembleChunkRow.worker, EnsembleChunkRow.digests)
+                                     .where(EnsembleChunkRow.ensemble_id == ensemble_id)).all()
+        return {"request": row.request, "created_at": row.created_at, "chunks": [tuple(c) for c in row.chunks],
+                "owner": row.owner, "cancelled": row.cancelled,
+                "done": {c.chunk for c in chunks if c.done},
+                "progress": {c.chunk: c.members_done for c in chunks if c.starts and not c.done},
+                "digests": {c.chunk: c.digests for c in chunks if c.done},
+                "workers": {c.chunk: c.worker for c in chunks if c.done},
+                "starts": {c.chunk: c.starts for c in chunks if c.starts}}
+
+    def spec(self, ensemble_id: str) -> tuple[dict[str, Any], list[tuple[int, int]]] | None:
+        """The request and the chunks' member ranges."""
+        with self._session() as session:
+            row = session.execute(select(EnsembleRow.request, EnsembleRow.chunks)
+                                  .where(EnsembleRow.id == ensemble_id)).first()
+        return None if row is None else (row.request, [tuple(c) for c in row.chunks])
+
+    def is_cancelled(self, ensemble_id: str) -> bool:
+        with self._session() as session:
+            return bool(session.scalar(select(EnsembleRow.cancelled).where(EnsembleRow.id == ensemble_id)))
+
+    def chunk_done(self, ensemble_id: str, chunk: int) -> bool:
+        with self._session() as session:
+            return bool(session.scalar(select(EnsembleChunkRow.done).where(
+                EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk)))
+
+    def chunk_members(self, ensemble_id: str, chunk: int) -> list[dict[str, Any]] | None:
+        with self._session() as session:
+            return session.scalar(select(EnsembleChunkRow.members).where(
+                EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk))
+
+    def pending_chunks(self, ensemble_id: str) -> list[int]:
+        """Chunks not done, in order."""
+        with self._session() as session:
+            return list(session.scalars(select(EnsembleChunkRow.chunk).where(
+                EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.done.is_(False))
+                .order_by(EnsembleChunkRow.chunk)))
+
+    def unfinished(self) -> list[str]:
+        """Ensembles not cancelled with a chunk pending, oldest first (to resume after a restart)."""
+        with self._session() as session:
+            return list(session.scalars(select(EnsembleRow.id)
+                                        .where(EnsembleRow.cancelled.is_(False), _PENDING)
+                                        .order_by(EnsembleRow.created, EnsembleRow.id)))
+
+    def sent_before(self, broker_epoch: str, limit: int = 1000) -> list[tuple[str, str | None, str | None]]:
+        """Unfinished ensembles whose chunks were sent in another broker epoch (those messages are
+        gone): (id, queue, epoch)."""
+        with self._session() as session:
+            rows = session.execute(select(EnsembleRow.id, EnsembleRow.queue, EnsembleRow.broker_epoch)
+                                   .where(EnsembleRow.cancelled.is_(False), _PENDING,
+                                          or_(EnsembleRow.broker_epoch.is_(None),
+                                              EnsembleRow.broker_epoch != broker_epoch))
+                                   .order_by(EnsembleRow.created).limit(limit))
+            return [tuple(row) for row in rows]  # type: ignore[misc]
