@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
 
 from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView, MembersPage
-from schemas.problems import CONFLICT, NOT_FOUND, FieldError
+from schemas.problems import CONFLICT, FieldError
 from service.access import ensemble_of
 from service.admission import admit_work
 from service.backends import JobBackend

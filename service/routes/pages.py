@@ -12,7 +12,7 @@ from fastapi import APIRouter, Request, Response
 from fastapi.responses import HTMLResponse
 
 from nonholonomic.systems import get_system
-from schemas.problems import CONFLICT, NOT_FOUND
+from schemas.problems import CONFLICT
 from schemas.report import REPORT_JOB
 from schemas.results import system_units
 from service.access import ensemble_of, job_of
