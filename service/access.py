@@ -112,8 +112,10 @@ class Access:
         return owner
 
 
-def caller(request: Request) -> str | None:
-    """FastAPI dependency: the caller's owner id (see :meth:`Access.owner`), kept on ``request.state``."""
+async def caller(request: Request) -> str | None:
+    """FastAPI dependency: the caller's owner id (see :meth:`Access.owner`), kept on ``request.state``.
+    Async, because it does not block: a sync dependency would cost every request a trip through the
+    thread pool."""
     owner = request.app.state.access.owner(request)
     request.state.owner = owner
     return owner

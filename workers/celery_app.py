@@ -51,8 +51,9 @@ def make_app() -> Celery:
         task_time_limit=settings.job_time_limit_s,
         broker_transport_options={"visibility_timeout": settings.visibility_timeout_s},
         result_expires=settings.job_ttl_s,
-        # STARTED is written by the task itself, after it checked that its job is not finished already
-        # (a redelivered task of a finished job must not show it running again): workers.tasks
+        # "running" is the job store's (written by the task once it checked that its job has not ended:
+        # a redelivered task of a finished job must not show it running again); Celery's result backend
+        # carries only PROGRESS
         task_track_started=False,
         task_default_queue=settings.queue,
         broker_connection_retry_on_startup=True,

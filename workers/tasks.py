@@ -79,13 +79,13 @@ def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
     request, refused = request_from_args(args, kwargs)
     try:
         store = job_store()
-        store.ensure(job_id, request, (self.request.delivery_info or {}).get("routing_key"))
         started = store.start(job_id, _worker_key())
+        if not started and store.ensure(job_id, request, (self.request.delivery_info or {}).get("routing_key")):
+            started = store.start(job_id, _worker_key())  # sent straight to the broker: recorded now
     except OperationalError as exc:  # the database is away: try again in a few seconds, the job unchanged
         raise self.retry(exc=exc, countdown=START_RETRY_S, max_retries=None) from None
     if not started:
         raise Ignore()
-    self.update_state(state=states.STARTED)
     if refused is not None:
         raise InvalidJob(refused)
     try:

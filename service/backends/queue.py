@@ -10,6 +10,7 @@ messages workers reserved but did not start yet).
 
 from __future__ import annotations
 
+import time
 import uuid
 from typing import Any
 
@@ -37,6 +38,8 @@ from workers.tasks import ensemble_chunk, simulate_job
 #: queue is no longer; else its newest and oldest halves). One such scan per unknown id and per first
 #: page of the list.
 BROKER_SCAN_LIMIT = 1000
+#: Seconds the broker's epoch is cached (one Redis round trip less per submission).
+EPOCH_TTL_S = 1.0
 #: Seconds /health waits for Redis.
 HEALTH_TIMEOUT_S = 0.05
 
@@ -52,6 +55,7 @@ class QueueBackend:
         self.redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=5)
         self.store = JobStore(settings.store_url, settings.job_ttl_s)
         self.store.migrate()
+        self._epoch: tuple[str, float] | None = None
         self.ensembles = EnsembleStore(self.store.engine, settings.job_ttl_s)
         # /health answers within its deadline even when Redis does not
         self._health_redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=HEALTH_TIMEOUT_S,
@@ -61,14 +65,26 @@ class QueueBackend:
         """Record the job, then send it; if the broker refuses, the record is removed and the error
         raised (a 503: nothing was accepted)."""
         job_id = str(uuid.uuid4())
-        epoch = broker_epoch(self.redis)
-        created_at = self.store.create(job_id, request, owner, self.settings.queue, epoch)
+        created_at = self.store.create(job_id, request, owner, self.settings.queue, self._broker_epoch())
         try:
-            simulate_job.apply_async(args=[request], task_id=job_id, queue=self.settings.queue, retry=False)
+            # ignore_result: the result goes to the job store, so the API does not subscribe to the task's
+            # result channel; argsrepr: the logs and events name the job instead of writing out the request
+            simulate_job.apply_async(args=[request], task_id=job_id, queue=self.settings.queue, retry=False,
+                                     ignore_result=True, argsrepr=f"[<{request['system']['kind']} job>]",
+                                     kwargsrepr="{}")
         except Exception:
             self.store.delete(job_id)
             raise
         return JobRecord(job_id, "queued", 0.0, created_at, request, owner=owner)
+
+    def _broker_epoch(self) -> str:
+        """The broker's epoch, read at most every :data:`EPOCH_TTL_S`. A job recorded with an epoch
+        that has just ended is sent again by the workers' sweep: a second message, which the worker
+        that receives it drops (the job runs once), never a lost one."""
+        now = time.monotonic()
+        if self._epoch is None or now - self._epoch[1] > EPOCH_TTL_S:
+            self._epoch = (broker_epoch(self.redis), now)
+        return self._epoch[0]
 
     def _progress(self, job_id: str) -> float:
         """A running job's progress as its worker last reported it (0 if Redis does not answer)."""
@@ -103,13 +119,13 @@ class QueueBackend:
             parsed = parse_task_message(raw)
             if parsed is not None and parsed[0] == job_id:
                 self.store.ensure(job_id, request_from_args(parsed[1], parsed[2])[0], self.settings.queue,
-                                  broker_epoch(self.redis))
+                                  self._broker_epoch())
                 return True
         return False
 
     def _discover_all(self) -> None:
         """Record every job waiting in the queue's (scanned part) that the store does not know."""
-        epoch = broker_epoch(self.redis)
+        epoch = self._broker_epoch()
         for raw in queued_messages(self.redis, self.settings.queue, BROKER_SCAN_LIMIT):
             parsed = parse_task_message(raw)
             if parsed is not None:
@@ -146,7 +162,7 @@ class QueueBackend:
         the error raised (a 503: nothing was accepted)."""
         ensemble_id = str(uuid.uuid4())
         created_at = self.ensembles.create(ensemble_id, request, chunks, owner, self.settings.queue,
-                                           broker_epoch(self.redis))
+                                           self._broker_epoch())
         try:
             group(ensemble_chunk.si(ensemble_id, i).set(task_id=chunk_task_id(ensemble_id, i),
                                                         queue=self.settings.queue)
