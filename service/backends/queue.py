@@ -44,6 +44,13 @@ EPOCH_TTL_S = 1.0
 HEALTH_TIMEOUT_S = 0.05
 
 
+def _argsrepr(request: dict[str, Any]) -> str:
+    """How the task's argument shows in the worker's logs: the job's kind, not the whole request."""
+    system = request.get("system")
+    kind = system.get("kind") if isinstance(system, dict) else ("paper report" if "claims" in request else None)
+    return f"[<{kind or 'job'} request>]"
+
+
 class QueueBackend:
     """Jobs recorded in the job store (PostgreSQL, :mod:`store`) and sent to the Celery queue
     ``settings.queue``; workers write their ends and results to the store, progress through Celery."""
@@ -70,8 +77,7 @@ class QueueBackend:
             # ignore_result: the result goes to the job store, so the API does not subscribe to the task's
             # result channel; argsrepr: the logs and events name the job instead of writing out the request
             simulate_job.apply_async(args=[request], task_id=job_id, queue=self.settings.queue, retry=False,
-                                     ignore_result=True, argsrepr=f"[<{request['system']['kind']} job>]",
-                                     kwargsrepr="{}")
+                                     ignore_result=True, argsrepr=_argsrepr(request), kwargsrepr="{}")
         except Exception:
             self.store.delete(job_id)
             raise
