@@ -263,7 +263,6 @@ def main() -> int:
         get_cpu_ms = (cpu_seconds(api.pid) - cpu0) / len(sample) * 1e3
 
         p99 = float(np.percentile(paced.latencies_ms, 99))
-        cpu = (burst.api_cpu_ms * burst.jobs + paced.api_cpu_ms * paced.jobs) / (burst.jobs + paced.jobs)
         bare = 2 / reference_s
 
         def verdict(ok: bool) -> str:
@@ -275,8 +274,9 @@ def main() -> int:
         print(burst.line(f"saturation ({burst.jobs})"))
         print(paced.line(f"paced ({paced.jobs})"))
         print(f"  API CPU per result read {get_cpu_ms:.2f} ms")
-        print(f"API CPU per job          {cpu:6.2f} ms   target < {TARGETS['api_cpu_ms']:g} ms   "
-              f"ratio {cpu / TARGETS['api_cpu_ms']:.2f}   {verdict(cpu < TARGETS['api_cpu_ms'])}")
+        for name, phase in (("saturation", burst), ("paced", paced)):  # busy: warm caches; paced: each alone
+            print(f"API CPU per job ({name + ')':<11s}{phase.api_cpu_ms:5.2f} ms   target < {TARGETS['api_cpu_ms']:g} ms   "
+                  f"ratio {phase.api_cpu_ms / TARGETS['api_cpu_ms']:.2f}   {verdict(phase.api_cpu_ms < TARGETS['api_cpu_ms'])}")
         print(f"end to end (saturation)  {burst.end_to_end_per_s:6.1f} /s   target ≥ {TARGETS['jobs_per_s']:g}/s   "
               f"ratio {burst.end_to_end_per_s / TARGETS['jobs_per_s']:.2f}   "
               f"{verdict(burst.end_to_end_per_s >= TARGETS['jobs_per_s'])};  "
