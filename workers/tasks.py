@@ -80,8 +80,9 @@ def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
     try:
         store = job_store()
         started = store.start(job_id, _worker_key())
-        if not started and store.ensure(job_id, request, (self.request.delivery_info or {}).get("routing_key")):
-            started = store.start(job_id, _worker_key())  # sent straight to the broker: recorded now
+        if not started:  # sent straight to the broker: record it (unless the API just did), then start it
+            store.ensure(job_id, request, (self.request.delivery_info or {}).get("routing_key"))
+            started = store.start(job_id, _worker_key())
     except OperationalError as exc:  # the database is away: try again in a few seconds, the job unchanged
         raise self.retry(exc=exc, countdown=START_RETRY_S, max_retries=None) from None
     if not started:
