@@ -7,8 +7,9 @@ from typing import Any
 from nonholonomic.analysis.sampling import describe_sampling, fixable
 from nonholonomic.definition import Parameter
 from nonholonomic.isomorphisms import maps_for
+from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, potential_symbols
 from nonholonomic.simulation import available_checks
-from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
+from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system, own_names, user_potential
 
 
 def _parameter(par: Parameter) -> dict[str, Any]:
@@ -31,8 +32,10 @@ def describe(kind: str) -> dict[str, Any]:
     potentials = SUPPORTED_POTENTIALS[kind]
     definitions = {p: get_system(kind, p) for p in potentials}
     base = definitions[potentials[0]]
+    variables = potential_symbols(module.POTENTIAL_VARIABLES)
+    sample = user_potential(kind, f"q*{variables[-1]}", ("q",))  # what any U written by the user keeps
     integrals: dict[str, dict[str, Any]] = {}
-    for potential, system in definitions.items():
+    for potential, system in [*definitions.items(), (EXPRESSION, get_system(kind, sample))]:
         for claim in system.integrals:
             entry = integrals.setdefault(claim.name, {"name": claim.name, "formula": claim.formula,
                                                       "equation": claim.equation, "claimed_for_potentials": []})
@@ -47,6 +50,11 @@ def describe(kind: str) -> dict[str, Any]:
                         # what an ensemble's {"sample": {"level": {...}}} may fix, and how states are drawn
                         "levels": list(fixable(definitions[p])), "sampling": describe_sampling(definitions[p])}
                        for p in potentials],
+        "potential_expression": {
+            "kind": EXPRESSION, "variables": variables, "formula": "U = <expression>",
+            "max_length": MAX_EXPRESSION_LENGTH, "max_parameters": MAX_EXPRESSION_PARAMETERS,
+            "reserved_names": sorted(own_names(kind)),
+            "example": {"kind": EXPRESSION, "U": f"q*{variables[-1]}**2", "parameters": {"q": 0.5}}},
         "state": [{"name": v.name, "components": [str(s) for s in v.symbols], "meaning": v.meaning, "unit": v.unit}
                   for v in base.state],
         "alternative_inputs": [{"name": a.name, "replaces": a.replaces, "formula": a.formula}

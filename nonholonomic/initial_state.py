@@ -121,7 +121,24 @@ def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, ob
     if project:
         with np.errstate(all="ignore"):
             y, _ = project_initial_state(system, p, y)
-    return constraint_problems(system, p, y)
+    return constraint_problems(system, p, y) + potential_problems(system, p, y)
+
+
+def potential_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
+    """A user's potential (``potential == "expression"``) whose gradient, so the field, is not finite at
+    the initial state: refused before anything runs, naming ``system.potential.U``."""
+    if system.potential != "expression":
+        return []
+    try:
+        with np.errstate(all="ignore"):
+            f = numeric(system).rhs_single(np.asarray(y, dtype=float), p)
+    except Exception as exc:  # noqa: BLE001 - whatever numpy cannot evaluate is the user's U's problem
+        return [FieldProblem("system.potential.U", f"{system.potential_formula}: cannot be evaluated at the initial "
+                                                   f"state ({type(exc).__name__}: {exc})")]
+    if np.all(np.isfinite(f)):
+        return []
+    return [FieldProblem("system.potential.U", f"{system.potential_formula}: its gradient is not finite at the "
+                                               "initial state (a singularity there); choose another U or state")]
 
 
 def parameter_warnings(system: MechanicalSystem, parameters: Mapping[str, object]) -> list[str]:

@@ -318,9 +318,12 @@ def get_map(name: str, potential: str = "zero") -> IsomorphismMap:
 
 
 def maps_for(kind: str, potential: str) -> list[str]:
-    """Names of the maps whose source is ``kind`` with ``potential``."""
+    """Names of the maps whose source is ``kind`` with ``potential`` (a built-in one: the maps are
+    derived for named potentials, not for a user's expression)."""
+    from nonholonomic.systems import SUPPORTED_POTENTIALS
+
     return [name for name, src in SOURCE_KINDS.items()
-            if src == kind and (MAPS[name][1] is None or potential in MAPS[name][1])]
+            if src == kind and potential in (MAPS[name][1] or SUPPORTED_POTENTIALS[kind])]
 
 
 # --------------------------------------------------------------------------------------------------

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 
 import sympy as sp
 
 from nonholonomic.definition import Parameter, dot, symmetric_matrix_symbols, upper_triangle, vector_symbols
+from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
 
 Variables = Mapping[str, sp.Matrix]
 """State vectors by name, plus ``"I"``: the inertia tensor, where the system has one."""
@@ -100,6 +102,86 @@ def harmonic(on: str = "x") -> Potential:
         build=lambda v: k / 2 * dot(v[on], v[on]),
         scale=lambda v: sp.Abs(k) / 2 * dot(v[on], v[on]),
     )
+
+
+#: The request name of a potential the user writes as an expression.
+EXPRESSION = "expression"
+#: Longest expression of a potential (characters), as for the symbolic requests.
+MAX_EXPRESSION_LENGTH = 2000
+#: Most parameters an expression potential may declare.
+MAX_EXPRESSION_PARAMETERS = 20
+
+
+def potential_symbols(variables: tuple[str, ...]) -> list[str]:
+    """The names an expression potential may use for the state vectors ``variables``: their components
+    ``gamma1, gamma2, gamma3`` ..."""
+    return [f"{v}{i}" for v in variables for i in (1, 2, 3)]
+
+
+@lru_cache(maxsize=128)
+def expression(text: str, parameters: tuple[str, ...], variables: tuple[str, ...]) -> Potential:
+    """A potential the user writes: ``U`` as text in the components of the state vectors
+    ``variables`` (e.g. ``gamma1 .. gamma3``) and the scalar ``parameters`` (their values come with
+    the request), parsed by :func:`nonholonomic.expressions.parse_expression` (never ``eval``).
+
+    Cached by its text, parameter names and variables (at most 128), so that the same expression
+    gives the same :class:`Potential`, the same system and the same compiled integrator.
+
+    Raises
+    ------
+    ExpressionError
+        The text is not an expression of those names (the reason and the character), or a parameter
+        name is not admissible or takes a state component's name.
+    """
+    if len(parameters) > MAX_EXPRESSION_PARAMETERS:
+        raise ExpressionError(f"at most {MAX_EXPRESSION_PARAMETERS} parameters")
+    components = potential_symbols(variables)
+    for name in parameters:
+        if name in components:
+            raise ExpressionError(f"parameter name {name!r} is a state component's name")
+    symbols = declare_symbols([*components, *parameters])
+    U = smooth_potential(parse_expression(text, symbols, max_length=MAX_EXPRESSION_LENGTH))
+    by_vector = {v: [symbols[f"{v}{i}"] for i in (1, 2, 3)] for v in variables}
+
+    def build(v: Variables) -> sp.Expr:
+        return U.xreplace({s: v[name][i] for name, syms in by_vector.items() for i, s in enumerate(syms)})
+
+    return Potential(
+        EXPRESSION, f"U = {text}",
+        tuple(Parameter(name, (symbols[name],), "parameter of the potential U", "as U needs") for name in parameters),
+        build=build,
+        scale=lambda v: sp.Abs(build(v)),
+    )
+
+
+#: Functions whose derivative the equations cannot use (a potential's gradient drives the motion),
+#: with a smooth stand-in.
+_NOT_SMOOTH = {sp.Abs: ("abs", "for |x| write sqrt(x**2 + eps**2)"),
+               sp.sign: ("sign", "for sign(x) write x/sqrt(x**2 + eps**2)")}
+
+
+def smooth_potential(U: sp.Expr) -> sp.Expr:
+    """``U`` as the integrator takes it: ``cot``, ``sec``, ``csc`` written with ``sin`` and ``cos``.
+
+    Raises
+    ------
+    ExpressionError
+        For ``abs`` or ``sign`` (not differentiable: the field needs ∂U), and for a power whose
+        exponent is not a rational number (``x**pi``, ``x**q``).
+    """
+    for func, (name, instead) in _NOT_SMOOTH.items():
+        if U.has(func):
+            raise ExpressionError(f"{name}() is not smooth: the equations need U's gradient ({instead})")
+    for power in U.atoms(sp.Pow):
+        if not power.exp.is_Rational:
+            raise ExpressionError(f"the exponent of {power} must be a rational number (write exp(y*log(x)) for x**y)")
+    return U.replace(sp.cot, lambda x: sp.cos(x) / sp.sin(x)).replace(
+        sp.sec, lambda x: 1 / sp.cos(x)).replace(sp.csc, lambda x: 1 / sp.sin(x))
+
+
+def resolve(potentials: Mapping[str, Potential], potential: str | Potential) -> Potential:
+    """A system's potential: a name of its ``POTENTIALS``, or one built by :func:`expression`."""
+    return potential if isinstance(potential, Potential) else potentials[potential]
 
 
 def catalog_of(*potentials: Potential) -> dict[str, Potential]:

@@ -39,6 +39,18 @@ class CatalogPotential(_Strict):
     sampling: str = Field(description="how states on a level set are drawn")
 
 
+class CatalogExpressionPotential(_Strict):
+    """How to write a potential of one's own: ``{"kind": "expression", "U": ..., "parameters": {...}}``."""
+
+    kind: str
+    variables: list[str] = Field(description="the names U may use besides its own parameters")
+    formula: str
+    max_length: int = Field(description="longest U (characters)")
+    max_parameters: int
+    reserved_names: list[str] = Field(description="names a parameter of U may not take (the system's own)")
+    example: dict[str, Any]
+
+
 class CatalogStateVector(_Strict):
     name: str
     components: list[str]
@@ -97,6 +109,9 @@ class SystemDescription(_Strict):
     equation: str = Field(description="paper equation label")
     parameters: list[CatalogParameter]
     potentials: list[CatalogPotential]
+    potential_expression: CatalogExpressionPotential = Field(
+        description="a potential written as an expression; integrals claimed for it are those whose "
+                    "claimed_for_potentials lists 'expression'")
     state: list[CatalogStateVector]
     alternative_inputs: list[CatalogAlternativeInput]
     derived: list[CatalogDerivedVector]

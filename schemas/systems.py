@@ -9,11 +9,12 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, create_model
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
-from nonholonomic.potentials import Potential
-from nonholonomic.systems import SYSTEMS, get_system
+from nonholonomic.expressions import ExpressionError, declare_symbols
+from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, Potential
+from nonholonomic.systems import POTENTIAL_NAMES, SYSTEMS, get_system, own_names, user_potential
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 #: Admissible state components (initial states, vectors): beyond, the equations' products overflow.
@@ -67,6 +68,61 @@ class PotentialSpec(BaseModel):
     def parameter_values(self) -> dict[str, Any]:
         return self.model_dump(exclude={"kind"})
 
+    def core(self, kind: str) -> str | Potential:
+        """What :func:`nonholonomic.systems.get_system` takes for this potential of ``kind``."""
+        return self.kind  # type: ignore[attr-defined,no-any-return]
+
+
+ParameterFloat = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE, le=MAX_PARAMETER_MAGNITUDE)]
+
+
+class ExpressionPotentialSpec(PotentialSpec):
+    """A potential written as an expression (parsed without eval; the catalog lists the names it may use)."""
+
+    kind: Literal["expression"]
+    parameters: dict[str, ParameterFloat] = Field(
+        default_factory=dict, max_length=MAX_EXPRESSION_PARAMETERS,
+        description="values of the expression's own parameters by name (not a name of the system's)")
+    U: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
+                   description="U as an expression in the kind's potential variables (catalog: potential_variables) "
+                               "and the parameters; + - * / **, numbers, pi, E, sin cos exp log sqrt ...")
+
+    def parameter_values(self) -> dict[str, Any]:
+        return dict(self.parameters)
+
+    def core(self, kind: str) -> Potential:
+        return user_potential(kind, self.U, tuple(sorted(self.parameters)))
+
+
+def _expression_model(kind: str) -> type[PotentialSpec]:
+    def names(cls: type, values: dict[str, float]) -> dict[str, float]:
+        try:
+            declare_symbols(list(values))
+        except ExpressionError as exc:
+            raise ValueError(str(exc)) from None
+        taken = sorted(set(values) & (own_names(kind) | set(POTENTIAL_NAMES[kind])))
+        if taken:
+            raise ValueError(f"{', '.join(taken)}: already a name of {kind} (its parameters, state or potential "
+                             "variables); choose another")
+        return values
+
+    def parsed(cls: type, text: str, info: ValidationInfo) -> str:
+        if "parameters" not in info.data:
+            return text  # the parameters are refused already
+        try:
+            user_potential(kind, text, tuple(sorted(info.data["parameters"])))
+        except ExpressionError as exc:
+            raise ValueError(str(exc)) from None
+        return text
+
+    return create_model(  # type: ignore[call-overload]
+        f"{_camel(kind)}ExpressionPotential",
+        __base__=ExpressionPotentialSpec,
+        __doc__=f"U written as an expression in {', '.join(POTENTIAL_NAMES[kind])} and its own parameters",
+        __validators__={"names": field_validator("parameters")(classmethod(names)),  # type: ignore[arg-type]
+                        "parsed": field_validator("U")(classmethod(parsed))},  # type: ignore[arg-type]
+    )
+
 
 #: Declared after ``D`` in the JSON schema of the ball kinds, so that generated clients keep the attribute ``D``.
 _LOWER_D = {"not": {}, "description": "not a field (always refused): the parameter is upper-case D, the paper's "
@@ -103,7 +159,7 @@ class SystemSpec(BaseModel):
 
     def definition(self) -> MechanicalSystem:
         """The core's symbolic definition for this kind and potential."""
-        return get_system(self.kind, self.potential.kind)  # type: ignore[attr-defined]
+        return get_system(self.kind, self.potential.core(self.kind))  # type: ignore[attr-defined]
 
 
 def _potential_model(kind: str, pot: Potential) -> type[PotentialSpec]:
@@ -118,7 +174,7 @@ def _potential_model(kind: str, pot: Potential) -> type[PotentialSpec]:
 
 def _system_model(kind: str) -> type[SystemSpec]:
     module = SYSTEMS[kind]
-    allowed = [_potential_model(kind, pot) for pot in module.POTENTIALS.values()]
+    allowed = [_potential_model(kind, pot) for pot in module.POTENTIALS.values()] + [_expression_model(kind)]
     potential_union = Annotated[Union[tuple(allowed)], Field(discriminator="kind")]  # type: ignore[valid-type]
     default, default_kind = allowed[0], next(iter(module.POTENTIALS))
     return create_model(  # type: ignore[call-overload]
@@ -128,9 +184,15 @@ def _system_model(kind: str) -> type[SystemSpec]:
         kind=(Literal[kind], ...),
         **{par.name: _parameter_field(par) for par in module.PARAMETERS},
         potential=(potential_union, Field(default_factory=lambda: default(kind=default_kind),
-                                          description=f"one of: {', '.join(module.POTENTIALS)} (default {list(module.POTENTIALS)[0]})")),
+                                          description=f"one of: {', '.join(module.POTENTIALS)}, {EXPRESSION} "
+                                                      f"(default {list(module.POTENTIALS)[0]})")),
     )
 
 
 SYSTEM_MODELS: dict[str, type[SystemSpec]] = {kind: _system_model(kind) for kind in SYSTEMS}
 AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discriminator="kind")]  # type: ignore[valid-type]
+
+
+def definition_of(system_json: dict[str, Any]) -> MechanicalSystem:
+    """The core's definition of a stored (already validated) request's ``system`` block."""
+    return SYSTEM_MODELS[system_json["kind"]].model_validate(system_json).definition()

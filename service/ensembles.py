@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from nonholonomic.analysis.ensemble import summarize
-from nonholonomic.systems import get_system
 from schemas.results import system_units
+from schemas.systems import definition_of
 from store.ensembles import EnsembleStore
 
 
@@ -67,10 +67,9 @@ def _section_members(store: EnsembleStore, ensemble_id: str,
                 yield member["index"], member["poincare"]
 
 
-def _units(request: dict[str, Any]) -> dict[str, str]:
-    """Units of the ensemble's system (read off its kind and potential; the members are not revalidated)."""
-    system = request["system"]
-    return system_units(get_system(system["kind"], system["potential"]["kind"]))
+def request_units(request: dict[str, Any]) -> dict[str, str]:
+    """Units of a job's or an ensemble's system (its members are not revalidated)."""
+    return system_units(definition_of(request["system"]))
 
 
 def _columns(section: dict[str, Any], units: dict[str, str]) -> list[tuple[str, str, int | None]]:
@@ -88,7 +87,7 @@ def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
     """Every member's crossings as CSV, one row per crossing, the member index first, a header naming
     each column and its unit (streamed a member at a time)."""
     header_written = False
-    units = _units(record["request"])
+    units = request_units(record["request"])
     for index, section in _section_members(store, ensemble_id, record):
         cols = _columns(section, units)
         buffer = io.StringIO()
@@ -118,5 +117,5 @@ def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
     arrays = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
     buffer = io.BytesIO()
     np.savez(buffer, **arrays, request_json=np.array(json.dumps(record["request"])),
-             units_json=np.array(json.dumps(_units(record["request"]))))
+             units_json=np.array(json.dumps(request_units(record["request"]))))
     return buffer.getvalue()

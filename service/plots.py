@@ -39,6 +39,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from nonholonomic.definition import MechanicalSystem, StateConstraint, StateVector
+from nonholonomic.potentials import EXPRESSION
 from nonholonomic.systems import get_system
 
 JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov")
@@ -212,9 +213,11 @@ def _bucket_max(y: np.ndarray, limit: int = MAX_LINE_POINTS) -> np.ndarray:
 
 
 def _definition(system_info: Mapping[str, Any]) -> MechanicalSystem:
-    """The core's definition of a result's ``system`` block (kind and potential)."""
+    """The core's definition of a result's ``system`` block, for its geometry (state vectors and
+    constraints, which a user's potential does not change)."""
+    potential = system_info.get("potential", "zero")
     try:
-        return get_system(system_info["kind"], system_info.get("potential", "zero"))
+        return get_system(system_info["kind"], "zero" if potential == EXPRESSION else potential)
     except KeyError as exc:
         raise PlotUnavailable(f"cannot rebuild the system of this result: {exc}") from None
 

@@ -10,13 +10,13 @@ pending (or they were cancelled).
 
 from __future__ import annotations
 
-import threading
 from datetime import datetime, timezone
 from typing import Any
 
 from sqlalchemy import Engine, delete, exists, insert, or_, select, update
 from sqlalchemy.orm import sessionmaker
 
+from store.expiry import Expiry
 from store.models import EnsembleChunkRow, EnsembleRow
 
 _PENDING = exists().where(EnsembleChunkRow.ensemble_id == EnsembleRow.id, EnsembleChunkRow.done.is_(False))
@@ -28,8 +28,7 @@ class EnsembleStore:
     def __init__(self, engine: Engine, ttl_s: int) -> None:
         self.engine, self.ttl_s = engine, ttl_s
         self._session = sessionmaker(engine, expire_on_commit=False)
-        self._cleaned = 0.0
-        self._cleaning = threading.Lock()
+        self._expiry = Expiry(self.delete_expired)
 
     # -- writing ---------------------------------------------------------------------------------
 
@@ -46,7 +45,7 @@ class EnsembleStore:
             session.execute(insert(EnsembleChunkRow), [
                 {"ensemble_id": ensemble_id, "chunk": i, "done": False, "members_done": 0, "starts": 0}
                 for i in range(len(chunks))])
-        self._clean_now_and_then(now.timestamp())
+        self._expiry.now_and_then(now.timestamp())
         return now.isoformat()
 
     def delete(self, ensemble_id: str) -> None:
@@ -102,15 +101,6 @@ class EnsembleStore:
                 session.execute(delete(EnsembleChunkRow).where(EnsembleChunkRow.ensemble_id.in_(ids)))
                 session.execute(delete(EnsembleRow).where(EnsembleRow.id.in_(ids)))
             return len(ids)
-
-    def _clean_now_and_then(self, now: float, every_s: float = 60.0) -> None:
-        if now - self._cleaned < every_s or not self._cleaning.acquire(blocking=False):
-            return
-        try:
-            self._cleaned = now
-            self.delete_expired()
-        finally:
-            self._cleaning.release()
 
     # -- reading ---------------------------------------------------------------------------------
 

@@ -8,7 +8,6 @@ only act on a job that has not ended). Finished jobs are deleted ``ttl_s`` after
 
 from __future__ import annotations
 
-import threading
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -19,6 +18,7 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
+from store.expiry import Expiry
 from store.models import JobRow
 
 _JOBS = JobRow.__table__
@@ -96,8 +96,7 @@ class JobStore:
         self.engine = make_engine(url)
         self._session = sessionmaker(self.engine, expire_on_commit=False)
         self._autocommit = self.engine.execution_options(isolation_level="AUTOCOMMIT")
-        self._cleaned = 0.0
-        self._cleaning = threading.Lock()
+        self._expiry = Expiry(self.delete_expired)
 
     def migrate(self) -> None:
         """Create the database if it is missing (PostgreSQL) and bring the schema to the newest revision
@@ -145,7 +144,7 @@ class JobStore:
         self._changed(insert(_JOBS).values(id=job_id, owner=owner, status="queued", request=request,
                                            created=now.timestamp(), created_at=now.isoformat(), attempts=0,
                                            queue=queue, broker_epoch=broker_epoch))
-        self._clean_now_and_then(now.timestamp())
+        self._expiry.now_and_then(now.timestamp())
         return now.isoformat()
 
     def ensure(self, job_id: str, request: dict[str, Any], queue: str | None = None,
@@ -225,15 +224,6 @@ class JobStore:
         with self._session.begin() as session:
             done = session.execute(delete(JobRow).where(JobRow.created < horizon, JobRow.status.in_(ENDED)))
             return int(done.rowcount)  # type: ignore[attr-defined]
-
-    def _clean_now_and_then(self, now: float, every_s: float = 60.0) -> None:
-        if now - self._cleaned < every_s or not self._cleaning.acquire(blocking=False):
-            return
-        try:
-            self._cleaned = now
-            self.delete_expired()
-        finally:
-            self._cleaning.release()
 
     # -- reading ---------------------------------------------------------------------------------
 

@@ -6,9 +6,12 @@ Adding a system is one new module exposing ``KIND``, ``TITLE``, ``PARAMETERS``, 
 
 from __future__ import annotations
 
+from functools import lru_cache
 from types import ModuleType
 
 from nonholonomic.definition import MechanicalSystem
+from nonholonomic.expressions import ExpressionError
+from nonholonomic.potentials import Potential, expression, potential_symbols
 from nonholonomic.systems import (
     ball_on_quadric,
     chaplygin_ball,
@@ -23,12 +26,13 @@ from nonholonomic.systems import (
 SYSTEMS: dict[str, ModuleType] = {module.KIND: module for module in (
     chaplygin_ball, veselova, chaplygin_ball_veselova, rubber_ball, ball_on_quadric, neumann, clebsch, veselova_e3)}
 
-#: Potentials each kind accepts.
+#: Built-in potentials each kind accepts (besides a user's expression, :func:`user_potential`).
 SUPPORTED_POTENTIALS: dict[str, tuple[str, ...]] = {kind: tuple(m.POTENTIALS) for kind, m in SYSTEMS.items()}
 
 
-def get_system(kind: str, potential: str = "zero") -> MechanicalSystem:
-    """The symbolic definition of ``kind`` with ``potential``.
+def get_system(kind: str, potential: str | Potential = "zero") -> MechanicalSystem:
+    """The symbolic definition of ``kind`` with ``potential``: the name of a built-in one, or one
+    written by the user (:func:`user_potential`).
 
     Raises
     ------
@@ -37,6 +41,37 @@ def get_system(kind: str, potential: str = "zero") -> MechanicalSystem:
     """
     if kind not in SYSTEMS:
         raise KeyError(f"unknown system kind {kind!r}; known: {sorted(SYSTEMS)}")
-    if potential not in SYSTEMS[kind].POTENTIALS:
+    if not isinstance(potential, Potential) and potential not in SYSTEMS[kind].POTENTIALS:
         raise KeyError(f"system {kind!r} does not support potential {potential!r}")
     return SYSTEMS[kind].define(potential)
+
+
+def user_potential(kind: str, text: str, parameters: tuple[str, ...]) -> Potential:
+    """The potential ``U = text`` of ``kind``, in the components of its :data:`POTENTIAL_VARIABLES` and
+    the scalar ``parameters``, whose names may not be the system's own.
+
+    Raises
+    ------
+    ExpressionError
+        For a text that is not such an expression, or a parameter's name the system already uses.
+    """
+    own = own_names(kind)
+    for name in parameters:
+        if name in own:
+            raise ExpressionError(f"parameter name {name!r} is already a name of {kind}: choose another")
+    return expression(text, tuple(parameters), SYSTEMS[kind].POTENTIAL_VARIABLES)
+
+
+@lru_cache(maxsize=None)
+def own_names(kind: str) -> frozenset[str]:
+    """Names a user's potential parameter may not take: the system's parameters and their symbols,
+    its state and derived vectors and their components, the times."""
+    system = SYSTEMS[kind].define("zero")
+    names = {p.name for p in system.parameters} | {str(s) for p in system.parameters for s in p.symbols}
+    names |= {v.name for v in system.state} | {str(s) for v in system.state for s in v.symbols}
+    names |= {d.name for d in system.derived} | {f"{d.name}{i}" for d in system.derived for i in (1, 2, 3)}
+    return frozenset(names | {"t", "tau"})
+
+
+#: The names a potential of each kind may use.
+POTENTIAL_NAMES: dict[str, list[str]] = {kind: potential_symbols(m.POTENTIAL_VARIABLES) for kind, m in SYSTEMS.items()}

@@ -65,7 +65,7 @@ from nonholonomic.definition import (
     upper_triangle,
     vector_symbols,
 )
-from nonholonomic.potentials import ZERO, catalog_of, harmonic, linear
+from nonholonomic.potentials import Potential, ZERO, catalog_of, harmonic, linear, resolve
 
 KIND = "ball_on_quadric"
 TITLE = "Nonholonomic Jacobi problem: a dynamically symmetric ball rolling on a quadric surface"
@@ -96,6 +96,8 @@ PARAMETERS = (
               transform=np.linalg.inv, transform_formula="B^-1"),
 )
 POTENTIALS = catalog_of(ZERO, linear("x", unit="kg m/s^2"), harmonic("x"))
+#: The state vectors a potential of this kind may depend on (an expression potential uses their components).
+POTENTIAL_VARIABLES = ("x",)
 
 #: A job request for this kind (the catalog shows it; tests and benchmarks run it).
 EXAMPLE = {
@@ -213,8 +215,8 @@ def joachimsthal(k: sp.Expr = sp.Integer(0)) -> sp.Expr:
     return K - k * dot(A_x, A_x) / (D0 + D)
 
 
-@lru_cache(maxsize=None)
-def define(potential: str = "zero") -> MechanicalSystem:
+@lru_cache(maxsize=256)
+def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The nonholonomic Jacobi problem with ``potential`` (a key of :data:`POTENTIALS`).
 
     Raises
@@ -224,7 +226,7 @@ def define(potential: str = "zero") -> MechanicalSystem:
     """
     if any(e != 0 for e in reduction_residual()):
         raise AssertionError("eliminating N does not give (D0 + D) domega/dt = D (omega, n) dn/dt - R n x dU/dx")
-    pot = POTENTIALS[potential]
+    pot = resolve(POTENTIALS, potential)
     variables = {"x": x}
     U = pot.build(variables)
     n = normal()

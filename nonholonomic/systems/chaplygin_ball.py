@@ -34,7 +34,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
-from nonholonomic.potentials import ZERO, brun, catalog_of, linear
+from nonholonomic.potentials import Potential, ZERO, brun, catalog_of, linear, resolve
 
 KIND = "chaplygin_ball"
 TITLE = "Chaplygin's ball rolling without slipping on a horizontal plane"
@@ -79,6 +79,8 @@ PARAMETERS = (
 )
 
 POTENTIALS = catalog_of(ZERO, linear("gamma"), brun("gamma"))
+#: The state vectors a potential of this kind may depend on (an expression potential uses their components).
+POTENTIAL_VARIABLES = ("gamma",)
 
 #: A job request for this kind (the catalog shows it; tests and benchmarks run it).
 EXAMPLE = {
@@ -93,8 +95,8 @@ STATE = (
 )
 
 
-@lru_cache(maxsize=None)
-def define(potential: str = "zero") -> MechanicalSystem:
+@lru_cache(maxsize=256)
+def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Chaplygin's ball with the potential ``potential`` (a key of :data:`POTENTIALS`).
 
     Returns
@@ -104,7 +106,7 @@ def define(potential: str = "zero") -> MechanicalSystem:
         F = (M, M) (eq. 2604-4), the measure of eq. (2604-3), and the reduced time
         ``dτ = ρ_μ dt`` (eq. 2604-5).
     """
-    pot = POTENTIALS[potential]
+    pot = resolve(POTENTIALS, potential)
     variables = {"gamma": gamma, "I": inertia}
     U = pot.build(variables)
     omega = contact_inertia_inverse() * M

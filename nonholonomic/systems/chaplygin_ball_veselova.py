@@ -65,7 +65,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
-from nonholonomic.potentials import ZERO, catalog_of, linear
+from nonholonomic.potentials import Potential, ZERO, catalog_of, linear, resolve
 from nonholonomic.systems.chaplygin_ball import (
     D,
     I1,
@@ -91,6 +91,8 @@ PARAMETERS = (
 )
 
 POTENTIALS = catalog_of(ZERO, linear("gamma", also_on="E"))
+#: The state vectors a potential of this kind may depend on (an expression potential uses their components).
+POTENTIAL_VARIABLES = ("gamma", "E")
 
 #: A job request for this kind (the catalog shows it; tests and benchmarks run it).
 EXAMPLE = {
@@ -170,8 +172,8 @@ def space_fixed_vector() -> sp.Matrix:
     return IQw - dot(IQw, E) * E
 
 
-@lru_cache(maxsize=None)
-def define(potential: str = "zero") -> MechanicalSystem:
+@lru_cache(maxsize=256)
+def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Chaplygin's ball with the Veselova constraint and the potential ``potential`` (a key of
     :data:`POTENTIALS`).
 
@@ -182,7 +184,7 @@ def define(potential: str = "zero") -> MechanicalSystem:
         (text after eq. 2704-5; F1, F2 of eq. 2704-6 for U = 0), the measure of eq. (2704-5) and no
         reduced time.
     """
-    pot = POTENTIALS[potential]
+    pot = resolve(POTENTIALS, potential)
     variables = {"gamma": gamma, "E": E, "I": inertia}
     U = pot.build(variables)
     omega_dot, _ = constrained_acceleration(contact_inertia(gamma), free_torque(U), E)

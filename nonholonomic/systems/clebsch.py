@@ -54,7 +54,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
-from nonholonomic.potentials import ZERO, catalog_of
+from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
 
 KIND = "clebsch"
 TITLE = "Clebsch case of the Kirchhoff equations on e(3) (target of Proposition 1)"
@@ -82,6 +82,8 @@ K = Parameter("k", (k,), "time scale k (Proposition 1 with the convention of eq.
 
 PARAMETERS = (INERTIA, ALPHA, BETA, C, K)
 POTENTIALS = catalog_of(ZERO)
+#: The state vectors a potential of this kind may depend on (an expression potential uses their components).
+POTENTIAL_VARIABLES = ("s",)
 #: A job request for this kind (the catalog shows it; tests and benchmarks run it).
 EXAMPLE = {
     "system": {"kind": KIND, "inertia": [1.0, 2.0, 3.0], "alpha": 0.7, "beta": -0.4, "c": 1.3, "k": 2.449489742783178,
@@ -159,8 +161,8 @@ def unit_s_constraint() -> StateConstraint:
 MEASURE = InvariantMeasure(sp.Integer(1), "rho = 1 (Lie-Poisson flow on e(3): div f = 0)", "2504-13")
 
 
-@lru_cache(maxsize=None)
-def define(potential: str = "zero") -> MechanicalSystem:
+@lru_cache(maxsize=256)
+def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Clebsch case of the Kirchhoff equations, eq. (2504-13), with H after Proposition 1 (corrected).
 
     Returns
@@ -169,16 +171,19 @@ def define(potential: str = "zero") -> MechanicalSystem:
         rhs derived from ``H = k (α H_α + β H_β)`` through the Kirchhoff equations; integrals H,
         (s, s), (s, L), H_α, H_β; density 1; no reduced time.
     """
-    pot = POTENTIALS[potential]
-    H = hamiltonian()
-    H_size = sp.Abs(k) * (sp.Abs(alpha) * size_alpha() + sp.Abs(beta) * size_beta())
+    pot = resolve(POTENTIALS, potential)
+    U = pot.build({"s": s})  # a user's U(s) is added to H; the field stays Lie-Poisson (density 1)
+    H = hamiltonian() + U
+    H_size = sp.Abs(k) * (sp.Abs(alpha) * size_alpha() + sp.Abs(beta) * size_beta()) + pot.scale({"s": s})
     integrals = common_integrals(
-        H, H_size, "H = k (alpha (L^2/2 + c/2 (s, I s)) + beta ((L, I L)/2 - c/2 det I (s, I^-1 s)))")
-    integrals += [
-        FirstIntegral("H_alpha", hamiltonian_alpha(), size_alpha(), "H_alpha = L^2/2 + c/2 (s, I s)", "2504-13"),
-        FirstIntegral("H_beta", hamiltonian_beta(), size_beta(), "H_beta = (L, I L)/2 - c/2 det I (s, I^-1 s)",
-                      "2504-13"),
-    ]
+        H, H_size, "H = k (alpha (L^2/2 + c/2 (s, I s)) + beta ((L, I L)/2 - c/2 det I (s, I^-1 s)))"
+        + (" + U(s)" if U != 0 else ""))
+    if pot.kind == "zero":  # H_alpha and H_beta commute only without an added U
+        integrals += [
+            FirstIntegral("H_alpha", hamiltonian_alpha(), size_alpha(), "H_alpha = L^2/2 + c/2 (s, I s)", "2504-13"),
+            FirstIntegral("H_beta", hamiltonian_beta(), size_beta(), "H_beta = (L, I L)/2 - c/2 det I (s, I^-1 s)",
+                          "2504-13"),
+        ]
     return MechanicalSystem(
         kind=KIND,
         potential=pot.kind,
@@ -190,7 +195,8 @@ def define(potential: str = "zero") -> MechanicalSystem:
         integrals=tuple(integrals),
         measure=MEASURE,
         reduced_time=None,
-        potential_formula="U = 0 (the potentials c/2 (s, I s) and -c/2 det I (s, I^-1 s) are part of H)",
+        potential_formula=(f"{pot.formula}, added to H" if pot.kind != "zero" else
+                           "U = 0 (the potentials c/2 (s, I s) and -c/2 det I (s, I^-1 s) are part of H)"),
         constraints=(unit_s_constraint(),),
         notes=(
             "rhs derived from H through ds/dt = s x dH/dL, dL/dt = L x dH/dL + s x dH/ds (eq. 2504-10-2 "

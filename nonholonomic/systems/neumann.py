@@ -31,7 +31,7 @@ from functools import lru_cache
 import sympy as sp
 
 from nonholonomic.definition import FirstIntegral, MechanicalSystem, Parameter, dot
-from nonholonomic.potentials import ZERO, catalog_of
+from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
 from nonholonomic.systems import clebsch
 from nonholonomic.systems.clebsch import INERTIA, UNIT_C, UNIT_K, I1, I2, I3, L, c, k, s
 
@@ -45,6 +45,8 @@ PARAMETERS = (
               UNIT_K),
 )
 POTENTIALS = catalog_of(ZERO)
+#: The state vectors a potential of this kind may depend on (an expression potential uses their components).
+POTENTIAL_VARIABLES = ("s",)
 #: A job request for this kind (the catalog shows it; tests and benchmarks run it).
 EXAMPLE = {
     "system": {"kind": KIND, "inertia": [1.0, 2.0, 3.0], "c": 1.3, "k": 2.449489742783178,
@@ -74,8 +76,8 @@ def uhlenbeck_integrals() -> list[FirstIntegral]:
     return out
 
 
-@lru_cache(maxsize=None)
-def define(potential: str = "zero") -> MechanicalSystem:
+@lru_cache(maxsize=256)
+def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Neumann problem: eq. (2504-13) at α = 1, β = 0.
 
     Returns
@@ -84,9 +86,13 @@ def define(potential: str = "zero") -> MechanicalSystem:
         rhs derived from ``H = k (L²/2 + c/2 (s, I s))``; integrals H, (s, s), (s, L) and G_1, G_2, G_3
         (Uhlenbeck); density 1; no reduced time.
     """
-    pot = POTENTIALS[potential]
-    H = clebsch.hamiltonian(sp.Integer(1), sp.Integer(0))
-    integrals = clebsch.common_integrals(H, sp.Abs(k) * clebsch.size_alpha(), "H = k (L^2/2 + c/2 (s, I s))")
+    pot = resolve(POTENTIALS, potential)
+    U = pot.build({"s": clebsch.s})  # a user's U(s) is added to H
+    H = clebsch.hamiltonian(sp.Integer(1), sp.Integer(0)) + U
+    integrals = clebsch.common_integrals(H, sp.Abs(k) * clebsch.size_alpha() + pot.scale({"s": clebsch.s}),
+                                         "H = k (L^2/2 + c/2 (s, I s))" + (" + U(s)" if U != 0 else ""))
+    if pot.kind == "zero":  # Uhlenbeck's integrals need H as it is
+        integrals += uhlenbeck_integrals()
     return MechanicalSystem(
         kind=KIND,
         potential=pot.kind,
@@ -95,10 +101,11 @@ def define(potential: str = "zero") -> MechanicalSystem:
         parameters=PARAMETERS + pot.parameters,
         state=STATE,
         rhs=clebsch.kirchhoff_equations(H),
-        integrals=tuple(integrals + uhlenbeck_integrals()),
+        integrals=tuple(integrals),
         measure=clebsch.MEASURE,
         reduced_time=None,
-        potential_formula="U = 0 (the potential c/2 (s, I s) is part of H)",
+        potential_formula=(f"{pot.formula}, added to H" if pot.kind != "zero" else
+                           "U = 0 (the potential c/2 (s, I s) is part of H)"),
         constraints=(clebsch.unit_s_constraint(),),
         notes=(
             "the Clebsch system of eq. 2504-13 at alpha = 1, beta = 0; rhs derived from H through the Kirchhoff "

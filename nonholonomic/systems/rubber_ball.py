@@ -47,7 +47,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
-from nonholonomic.potentials import ZERO, catalog_of, linear
+from nonholonomic.potentials import Potential, ZERO, catalog_of, linear, resolve
 from nonholonomic.systems.chaplygin_ball import D, I1, I2, I3, J, J_inv, contact_inertia, det_J, inertia
 from nonholonomic.systems.chaplygin_ball_veselova import constrained_acceleration
 
@@ -64,6 +64,8 @@ PARAMETERS = (
 )
 
 POTENTIALS = catalog_of(ZERO, linear("gamma"))
+#: The state vectors a potential of this kind may depend on (an expression potential uses their components).
+POTENTIAL_VARIABLES = ("gamma",)
 
 #: A job request for this kind (the catalog shows it; tests and benchmarks run it).
 EXAMPLE = {
@@ -93,8 +95,8 @@ def measure_density(g: sp.Matrix = gamma) -> sp.Expr:
     return sp.sqrt(dot(g, J_inv * g))
 
 
-@lru_cache(maxsize=None)
-def define(potential: str = "zero") -> MechanicalSystem:
+@lru_cache(maxsize=256)
+def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The rubber ball with the potential ``potential`` (a key of :data:`POTENTIALS`).
 
     Returns
@@ -103,7 +105,7 @@ def define(potential: str = "zero") -> MechanicalSystem:
         Eq. (2704-4) with E = γ and μ derived from d/dt (ω, γ) = 0; the Veselova system's integrals,
         measure and reduced time with I → J = I + D·1.
     """
-    pot = POTENTIALS[potential]
+    pot = resolve(POTENTIALS, potential)
     variables = {"gamma": gamma, "I": inertia}
     U = pot.build(variables)
     IQ = contact_inertia(gamma)

@@ -35,7 +35,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
-from nonholonomic.potentials import ZERO, brun, catalog_of, linear, quadratic
+from nonholonomic.potentials import Potential, ZERO, brun, catalog_of, linear, quadratic, resolve
 
 KIND = "veselova"
 TITLE = "Veselova system: a rigid body with a fixed point and the constraint (omega, gamma) = 0"
@@ -51,6 +51,8 @@ PARAMETERS = (
               minimum=0.0, strict=True),
 )
 POTENTIALS = catalog_of(ZERO, linear("gamma"), brun("gamma"), quadratic("gamma"))
+#: The state vectors a potential of this kind may depend on (an expression potential uses their components).
+POTENTIAL_VARIABLES = ("gamma",)
 #: A job request for this kind (the catalog shows it; tests and benchmarks run it).
 EXAMPLE = {
     "system": {"kind": KIND, "inertia": [2.0, 3.0, 4.5], "potential": {"kind": "zero"}},
@@ -83,10 +85,10 @@ def equations_of_motion(U: sp.Expr, mu: sp.Expr) -> tuple[sp.Expr, ...]:
     return tuple(omega_dot) + tuple(cross(gamma, omega))
 
 
-@lru_cache(maxsize=None)
-def define(potential: str = "zero") -> MechanicalSystem:
+@lru_cache(maxsize=256)
+def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Veselova system with ``potential`` (a key of :data:`POTENTIALS`)."""
-    pot = POTENTIALS[potential]
+    pot = resolve(POTENTIALS, potential)
     variables = {"gamma": gamma, "I": inertia}
     U = pot.build(variables)
     rho = measure_density()

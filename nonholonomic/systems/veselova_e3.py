@@ -32,7 +32,7 @@ from nonholonomic.definition import (
     StateVector,
     dot,
 )
-from nonholonomic.potentials import ZERO, catalog_of
+from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
 from nonholonomic.systems.clebsch import INERTIA, I1, I2, I3, inertia
 
 KIND = "veselova_e3"
@@ -50,6 +50,8 @@ PARAMETERS = (
               "1/(kg m^2)"),
 )
 POTENTIALS = catalog_of(ZERO)
+#: The state vectors a potential of this kind may depend on (an expression potential uses their components).
+POTENTIAL_VARIABLES = ("Gamma",)
 STATE = (
     StateVector("M", tuple(M), "momentum M = rho_omega I^(1/2) omega of eq. 2504-10-2", "1/s"),
     StateVector("Gamma", tuple(Gamma), "Gamma = rho_omega^-1 I^(-1/2) gamma of eq. 2504-10-2", "(kg m^2)^(-1/2)"),
@@ -77,8 +79,8 @@ def hamiltonian() -> sp.Expr:
     return alpha * hamiltonian_alpha() + beta * hamiltonian_beta()
 
 
-@lru_cache(maxsize=None)
-def define(potential: str = "zero") -> MechanicalSystem:
+@lru_cache(maxsize=256)
+def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Eq. (2504-12) on e(3), rhs ``dx/dt = {H, x}`` derived by sympy.
 
     Returns
@@ -86,17 +88,24 @@ def define(potential: str = "zero") -> MechanicalSystem:
     MechanicalSystem
         Integrals H, H_α, H_β (on (M, Γ) = 0) and the Casimirs Γ², (M, Γ); density 1 (Lie–Poisson).
     """
-    pot = POTENTIALS[potential]
+    pot = resolve(POTENTIALS, potential)
+    U = pot.build({"Gamma": Gamma})  # a user's U(Gamma) is added to H (eq. 2504-11 with its U)
+    H = hamiltonian() + U
     GIG = dot(Gamma, inertia * Gamma)
     size_M, size_G = sp.sqrt(dot(M, M)), sp.sqrt(dot(Gamma, Gamma))
     size_alpha = dot(M, M) * GIG / 2
     size_beta = dot(M, inertia * M) * GIG / 2 + dot(M, inertia * Gamma) ** 2 / 2
-    integrals = (
-        FirstIntegral("energy", hamiltonian(), sp.Abs(alpha) * size_alpha + sp.Abs(beta) * size_beta,
-                      "H = alpha M^2 (Gamma, I Gamma)/2 + beta ((M, I M)(Gamma, I Gamma) - (M, I Gamma)^2)/2", "2504-12"),
+    energy = FirstIntegral(
+        "energy", H, sp.Abs(alpha) * size_alpha + sp.Abs(beta) * size_beta + pot.scale({"Gamma": Gamma}),
+        "H = alpha M^2 (Gamma, I Gamma)/2 + beta ((M, I M)(Gamma, I Gamma) - (M, I Gamma)^2)/2"
+        + (" + U(Gamma)" if U != 0 else ""), "2504-12")
+    pair = (  # they commute only without an added U
         FirstIntegral("H_alpha", hamiltonian_alpha(), size_alpha, "H_alpha = M^2 (Gamma, I Gamma)/2", "2504-12"),
         FirstIntegral("H_beta", hamiltonian_beta(), size_beta,
                       "H_beta = ((M, I M)(Gamma, I Gamma) - (M, I Gamma)^2)/2 (on (M, Gamma) = 0)", "2504-12"),
+    ) if pot.kind == "zero" else ()
+    integrals = (
+        energy, *pair,
         FirstIntegral("geometric", dot(Gamma, Gamma), sp.Integer(1), "(Gamma, Gamma)", "2504-10-2"),
         FirstIntegral("area", dot(M, Gamma), size_M * size_G, "(M, Gamma) = 0", "2504-10-2"),
     )
@@ -107,11 +116,11 @@ def define(potential: str = "zero") -> MechanicalSystem:
         equation="2504-12",
         parameters=PARAMETERS + pot.parameters,
         state=STATE,
-        rhs=BRACKET.hamiltonian_vector_field(hamiltonian()),
+        rhs=BRACKET.hamiltonian_vector_field(H),
         integrals=integrals,
         measure=InvariantMeasure(sp.Integer(1), "rho = 1 (Lie-Poisson flow on e(3): div f = 0)", "2504-12"),
         reduced_time=None,
-        potential_formula="U = 0",
+        potential_formula=pot.formula,
         constraints=(
             StateConstraint("Gamma", size_G, 1.0, "|Gamma| = 1", "2504-10-2",
                             projection=Projection("Gamma", tuple(Gamma / size_G), "Gamma -> Gamma / |Gamma|")),
@@ -126,4 +135,4 @@ def define(potential: str = "zero") -> MechanicalSystem:
     )
 
 
-__all__ = ["KIND", "TITLE", "PARAMETERS", "POTENTIALS", "STATE", "EXAMPLE", "define", "I1", "I2", "I3"]
+__all__ = ["KIND", "TITLE", "PARAMETERS", "POTENTIALS", "POTENTIAL_VARIABLES", "STATE", "EXAMPLE", "define", "I1", "I2", "I3"]

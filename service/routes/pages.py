@@ -11,13 +11,11 @@ from typing import Any, Literal
 from fastapi import APIRouter, Request, Response
 from fastapi.responses import HTMLResponse
 
-from nonholonomic.systems import get_system
 from schemas.problems import CONFLICT
 from schemas.report import REPORT_JOB
-from schemas.results import system_units
 from service.access import ensemble_of, job_of
 from service.backends import JobBackend, JobRecord
-from service.ensembles import members_page, view
+from service.ensembles import members_page, request_units, view
 from service.errors import ProblemError, media_responses, problem_responses
 from service.pages import render_ensemble, render_job, render_report, render_report_status
 from service.plots import FORMATS, PlotUnavailable, ensemble_plot, job_plot
@@ -115,11 +113,6 @@ def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Req
     return _image(data, fmt, f"job-{job_id}-{name}.{fmt}")
 
 
-def _units(request_json: dict[str, Any]) -> dict[str, str]:
-    system = request_json["system"]
-    return system_units(get_system(system["kind"], system["potential"]["kind"]))
-
-
 @router.get("/v1/ensembles/{ensemble_id}/page", tags=["ensembles"], operation_id="ensembles-page",
             response_class=HTMLResponse, responses={**_HTML, **problem_responses({404: "unknown ensemble id"})},
             summary="The ensemble as a page: progress, summary, plots, the first members, links to the exports")
@@ -127,7 +120,7 @@ def ensemble_page(ensemble_id: str, request: Request) -> HTMLResponse:
     """Reloads itself every 2 s while chunks are queued or running."""
     record = _ensemble(request, ensemble_id)
     members = members_page(_backend(request).ensembles, ensemble_id, record, 0, PAGE_MEMBERS)
-    return HTMLResponse(render_ensemble(view(ensemble_id, record), members, _units(record["request"])))
+    return HTMLResponse(render_ensemble(view(ensemble_id, record), members, request_units(record["request"])))
 
 
 def _all_members(request: Request, ensemble_id: str, record: dict[str, Any]) -> Iterator[dict[str, Any]]:

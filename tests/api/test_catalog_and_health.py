@@ -54,7 +54,9 @@ def test_catalog_describes_the_ball(client):
     assert {p["kind"] for p in ball["potentials"]} == {"zero", "linear", "brun"}
     integrals = {i["name"]: i for i in ball["integrals"]}
     assert integrals["F"]["claimed_for_potentials"] == ["zero"] and integrals["F"]["equation"] == "2604-4"
-    assert set(integrals["energy"]["claimed_for_potentials"]) == {"zero", "linear", "brun"}
+    assert set(integrals["energy"]["claimed_for_potentials"]) == {"zero", "linear", "brun", "expression"}
+    assert ball["potential_expression"]["variables"] == ["gamma1", "gamma2", "gamma3"]
+    assert {"D", "I1", "M1", "omega1", "inertia"} <= set(ball["potential_expression"]["reserved_names"])
     assert ball["measure"]["equation"] == "2604-3" and ball["reduced_time"]["equation"] == "2604-5"
     assert ball["checks"] == ["integrals", "measure", "bracket", "euler_angles", "isomorphisms"]
     assert ball["maps"] == {"zero": ["chaplygin_ball_to_clebsch"]}  # Theorem 3 holds for U = 0 only

@@ -1,0 +1,75 @@
+"""A potential of the user's own through the API: a job and an ensemble with it run and keep their
+energy; a bad U, a bad parameter name and a U singular at the initial state are 422 problems naming
+the field; the catalog says which names a U may use."""
+
+from __future__ import annotations
+
+from tests.api.conftest import BALL, job
+from tests.support import poll_job
+
+USER = {"kind": "expression", "U": "q*gamma3**2 + r*sin(gamma1)", "parameters": {"q": 0.4, "r": -0.3}}
+
+
+def test_a_job_with_the_users_potential_runs_and_keeps_its_energy(client):
+    r = client.post("/v1/jobs", json=job(system={**BALL, "potential": USER}))
+    assert r.status_code == 202, r.text
+    view = poll_job(client, r.headers["location"])
+    assert view["status"] == "succeeded", view["error"]
+    result = view["result"]
+    assert result["system"]["potential"] == "expression"
+    assert result["system"]["potential_formula"] == f"U = {USER['U']}"
+    integrals = {i["name"]: i for i in result["integrals"]}
+    assert set(integrals) == {"energy", "geometric", "area"}  # F = (M, M) holds only for U = 0
+    assert integrals["energy"]["passed"] and integrals["energy"]["max_rel_drift"] < 1e-12
+    assert all(c["passed"] for c in result["checks"])
+    assert view["request"]["system"]["potential"] == USER
+    assert client.get(f"{r.headers['location']}/page").status_code == 200
+    assert client.get(f"{r.headers['location']}/plots/integrals.png").status_code == 200
+
+
+def test_an_ensemble_with_the_users_potential(client):
+    body = {"system": {**BALL, "potential": USER}, "t_final": 10.0,
+            "members": {"sample": {"count": 4, "seed": 2, "level": {"energy": 1.0}}}}
+    r = client.post("/v1/ensembles", json=body)
+    assert r.status_code == 202, r.text
+    view = poll_job(client, r.headers["location"])
+    assert view["status"] == "succeeded" and view["members_done"] == 4
+    members = client.get(f"{r.headers['location']}/members").json()["members"]
+    assert all(m["status"] == "succeeded" for m in members)
+    energies = [{i["name"]: i for i in m["integrals"]}["energy"]["initial"] for m in members]
+    assert all(abs(e - 1.0) < 1e-9 for e in energies), energies  # the level set of H = T + U with the user's U
+
+
+def _problem(client, potential, **state):
+    body = job(system={**BALL, "potential": potential})
+    if state:
+        body["initial_state"] = state
+    r = client.post("/v1/jobs", json=body)
+    assert r.status_code == 422 and r.headers["content-type"] == "application/problem+json", r.text
+    return {e["field"]: e["reason"] for e in r.json()["errors"]}
+
+
+def test_a_bad_users_potential_is_a_422_naming_the_field(client):
+    errors = _problem(client, {**USER, "U": "q*gamma3**2 + r*M1"})
+    assert "unknown name 'M1'" in errors["system.potential.U"] and "character 16" in errors["system.potential.U"]
+    errors = _problem(client, {**USER, "parameters": {"q": 1.0, "D": 2.0}})
+    assert "D: already a name of chaplygin_ball" in errors["system.potential.parameters"]
+    errors = _problem(client, {**USER, "U": "q*abs(gamma1)"})
+    assert "abs() is not smooth" in errors["system.potential.U"]
+    errors = _problem(client, {**USER, "U": "q/gamma1"})  # gamma1 = 0 at the initial state
+    assert "not finite at the initial state" in errors["system.potential.U"]
+    errors = _problem(client, {**USER, "parameters": {"q": float("1e300"), "r": 0.0}})
+    assert "system.potential.parameters.q" in errors
+
+
+def test_the_catalog_says_what_a_potential_may_use(client):
+    catalog = {s["kind"]: s for s in client.get("/v1/systems").json()["systems"]}
+    assert catalog["ball_on_quadric"]["potential_expression"]["variables"] == ["x1", "x2", "x3"]
+    assert catalog["chaplygin_ball_veselova"]["potential_expression"]["variables"] == [
+        "gamma1", "gamma2", "gamma3", "E1", "E2", "E3"]
+    example = catalog["clebsch"]["potential_expression"]["example"]
+    body = {**catalog["clebsch"]["example"], "t_final": 5.0}
+    body["system"] = {**body["system"], "potential": example}
+    r = client.post("/v1/jobs", json=body)
+    assert r.status_code == 202, r.text
+    assert poll_job(client, r.headers["location"])["status"] == "succeeded"
