@@ -6,7 +6,10 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from nonholonomic.evidence.claims import MAX_CLAIMS, parse_claim
+from nonholonomic.expressions import ExpressionError
 from nonholonomic.integration import SCIPY_MIN_TOLERANCE
+from nonholonomic.potentials import MAX_EXPRESSION_LENGTH
 from nonholonomic.initial_state import FieldProblem, initial_state_problems
 from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
 from nonholonomic.definition import MechanicalSystem
@@ -41,6 +44,17 @@ class IntegratorOptions(BaseModel):
                     f"scipy: rtol = atol (default 1e-12, at least {SCIPY_MIN_TOLERANCE:g})")
 
 
+class ClaimRequest(BaseModel):
+    """A claimed integral ``I(x)`` in the state components and the system's parameter symbols."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z_][A-Za-z0-9_ ()-]*$",
+                      description="what to call it in the result")
+    expression: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
+                            description="I as an expression, e.g. 'M1*gamma1 + M2*gamma2 + M3*gamma3'")
+
+
 class JobRequest(BaseModel):
     """A simulation job: a system, an initial state, the sample grid and the evidence wanted."""
 
@@ -71,6 +85,10 @@ class JobRequest(BaseModel):
     poincare: PoincareRequest | None = Field(None, description="a Poincare section of the orbit (heyoka events)")
     lyapunov: LyapunovRequest | None = Field(None, description="the Lyapunov spectrum of the orbit (heyoka "
                                                                "variational equations, QR)")
+    claims: list[ClaimRequest] = Field(
+        default_factory=list, max_length=MAX_CLAIMS,
+        description="candidate integrals or Casimirs of one's own, each checked along the trajectory (drift) and "
+                    "symbolically (dI/dt = sum dI/dx_i f_i identically zero, within a budget)")
 
     _t_final_limit = field_validator("t_final")(t_final_within_limit)
 
@@ -91,6 +109,11 @@ class JobRequest(BaseModel):
         found += initial_state_problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
                                         self.initial_state, self.project_initial_state)
         found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov)
+        for i, claim in enumerate(self.claims):
+            try:
+                parse_claim(system, claim.expression)
+            except ExpressionError as exc:
+                found.append(FieldProblem(f"claims[{i}].expression", str(exc)))
         return found
 
 

@@ -91,6 +91,26 @@ class ProjectionItem(BaseModel):
     change: float = Field(description="max |component change| of the projected vector")
 
 
+class ClaimSymbolic(BaseModel):
+    identically_conserved: bool | None = Field(
+        description="dI/dt = sum dI/dx_i f_i is identically 0 (True), is not (False: it may still vanish on the "
+                    "constraints' level set), or undecided within the budget (None)")
+    detail: str
+
+
+class ClaimItem(BaseModel):
+    """A claimed integral along the trajectory: ``max_rel_drift = max |I - I(0)| / max(|I(0)|, max |I|)``."""
+
+    name: str
+    expression: str
+    initial: float
+    final: float
+    max_rel_drift: float
+    tolerance: float
+    passed: bool = Field(description="the drift is within the tolerance of the system's own integrals")
+    symbolic: ClaimSymbolic
+
+
 class SimulationResultModel(BaseModel):
     system: SystemInfo
     initial_state: dict[str, list[float]] = Field(description="the state integrated from (after any projection)")
@@ -106,6 +126,14 @@ class SimulationResultModel(BaseModel):
     warnings: list[str]
     poincare: dict[str, Any] | None = Field(None, description="the Poincare section, when asked for")
     lyapunov: dict[str, Any] | None = Field(None, description="the Lyapunov spectrum, when asked for")
+    claims: list[ClaimItem] = Field(default_factory=list, description="the request's claims, each with its evidence")
+
+
+def claims_to_json(evidence: list[Any]) -> list[dict[str, Any]]:
+    """The JSON form of :class:`nonholonomic.evidence.claims.ClaimEvidence` items."""
+    return [{"name": c.name, "expression": c.expression, "initial": c.initial, "final": c.final,
+             "max_rel_drift": c.max_rel_drift, "tolerance": c.tolerance, "passed": c.passed,
+             "symbolic": {"identically_conserved": c.symbolic, "detail": c.symbolic_detail}} for c in evidence]
 
 
 def system_units(system: MechanicalSystem) -> dict[str, str]:

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from nonholonomic.evidence.claims import claim_evidence
 from nonholonomic.integration import ProgressCallback
 from nonholonomic.simulation import simulate
 from schemas.jobs import JobRequest
 from schemas.report import REPORT_JOB, PaperReportRequest
-from schemas.results import first_non_finite, result_to_json
+from schemas.results import claims_to_json, first_non_finite, result_to_json
 from workers.provenance import project
 
 
@@ -52,6 +53,9 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
         lyapunov=job.lyapunov.options() if job.lyapunov else None,
     )
     out = result_to_json(result, parameters)
+    if job.claims:
+        out["claims"] = claims_to_json(claim_evidence(system, result.parameters, result.trajectory,
+                                                      [(c.name, c.expression) for c in job.claims]))
     found = first_non_finite(out)
     if found is not None:
         raise NonFiniteResult(f"{found[0]} is {found[1]}: the numbers of this job overflow double precision "

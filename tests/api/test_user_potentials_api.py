@@ -73,3 +73,14 @@ def test_the_catalog_says_what_a_potential_may_use(client):
     r = client.post("/v1/jobs", json=body)
     assert r.status_code == 202, r.text
     assert poll_job(client, r.headers["location"])["status"] == "succeeded"
+
+
+def test_claims_come_back_with_their_evidence_and_a_bad_one_is_a_422(client):
+    body = job(claims=[{"name": "area", "expression": "M1*gamma1 + M2*gamma2 + M3*gamma3"}])
+    view = poll_job(client, client.post("/v1/jobs", json=body).headers["location"])
+    (claim,) = view["result"]["claims"]
+    assert claim["name"] == "area" and claim["passed"] and claim["symbolic"]["identically_conserved"] is True
+    r = client.post("/v1/jobs", json=job(claims=[{"name": "x", "expression": "M1 +* 2"}]))
+    assert r.status_code == 422 and "claims[0].expression" in {e["field"] for e in r.json()["errors"]}
+    r = client.post("/v1/jobs", json=job(claims=[{"name": "x", "expression": "M1"}] * 11))
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "claims"

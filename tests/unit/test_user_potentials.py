@@ -122,3 +122,36 @@ def test_a_u_singular_at_the_initial_state_is_refused():
     assert body["initial_state"]["gamma"][0] == 0.0
     problems = JobRequest.model_validate(body).problems()
     assert [p.field for p in problems] == ["system.potential.U"] and "not finite" in problems[0].reason
+
+
+# --- claims: a researcher's candidate integrals -------------------------------------------------------
+
+def test_claims_are_checked_along_the_trajectory_and_symbolically():
+    body = _body("chaplygin_ball", {"kind": "zero"}, 50.0)
+    body["claims"] = [{"name": "area", "expression": "M1*gamma1 + M2*gamma2 + M3*gamma3"},
+                      {"name": "F", "expression": "M1**2 + M2**2 + M3**2"},
+                      {"name": "not one", "expression": "M1"}]
+    claims = {c["name"]: c for c in run_job(body)["claims"]}
+    for name in ("area", "F"):  # (M, gamma) and, for U = 0, F = (M, M) (eq. 2604-2, 2604-4)
+        assert claims[name]["passed"] and claims[name]["max_rel_drift"] < 1e-13
+        assert claims[name]["symbolic"]["identically_conserved"] is True
+    assert not claims["not one"]["passed"] and claims["not one"]["max_rel_drift"] > 1e-3
+    assert claims["not one"]["symbolic"]["identically_conserved"] is False
+
+
+def test_a_claim_that_holds_only_without_the_potential_fails_with_it():
+    """F = (M, M) is an integral of the ball for U = 0 only: with a user's U the claim fails, both ways."""
+    text, parameters = USER_U["chaplygin_ball"]
+    body = _body("chaplygin_ball", {"kind": "expression", "U": text, "parameters": parameters}, 50.0)
+    body["claims"] = [{"name": "F", "expression": "M1**2 + M2**2 + M3**2"},
+                      {"name": "energy", "expression": "q*gamma3**2"}]  # U alone: not conserved
+    claims = {c["name"]: c for c in run_job(body)["claims"]}
+    assert not claims["F"]["passed"] and claims["F"]["symbolic"]["identically_conserved"] is False
+    assert not claims["energy"]["passed"]
+
+
+def test_a_bad_claim_is_a_problem_naming_its_field():
+    body = _body("chaplygin_ball", {"kind": "zero"})
+    body["claims"] = [{"name": "ok", "expression": "D*M1"}, {"name": "bad", "expression": "M1*omega1"}]
+    problems = JobRequest.model_validate(body).problems()
+    assert [p.field for p in problems] == ["claims[1].expression"] and "unknown name 'omega1'" in problems[0].reason
