@@ -61,6 +61,13 @@ SEGMENT_MEMORY_BYTES = 16 * 2**20
 ProgressCallback = Callable[[float], bool]
 
 
+#: heyoka keeps the code it compiled in memory for reuse, up to 2 GiB by default: a worker compiling
+#: many users' potentials would grow towards that. The built-in systems need about 17 MiB; beyond the
+#: limit the least recently used code is dropped (it is compiled again, or read from heyoka's disk
+#: cache, if needed again). Integrators in use are not affected.
+HEYOKA_MEMCACHE_BYTES = 64 * 2**20
+hy.llvm_state.set_memcache_limit(HEYOKA_MEMCACHE_BYTES)
+
 class IntegrationError(RuntimeError):
     """The integration stopped before ``t_final`` (non-finite state, step-size collapse ...)."""
 

@@ -215,7 +215,7 @@ def joachimsthal(k: sp.Expr = sp.Integer(0)) -> sp.Expr:
     return K - k * dot(A_x, A_x) / (D0 + D)
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The nonholonomic Jacobi problem with ``potential`` (a key of :data:`POTENTIALS`).
 

@@ -95,7 +95,7 @@ STATE = (
 )
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Chaplygin's ball with the potential ``potential`` (a key of :data:`POTENTIALS`).
 

@@ -172,7 +172,7 @@ def space_fixed_vector() -> sp.Matrix:
     return IQw - dot(IQw, E) * E
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Chaplygin's ball with the Veselova constraint and the potential ``potential`` (a key of
     :data:`POTENTIALS`).

@@ -161,7 +161,7 @@ def unit_s_constraint() -> StateConstraint:
 MEASURE = InvariantMeasure(sp.Integer(1), "rho = 1 (Lie-Poisson flow on e(3): div f = 0)", "2504-13")
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Clebsch case of the Kirchhoff equations, eq. (2504-13), with H after Proposition 1 (corrected).
 

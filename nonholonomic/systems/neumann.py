@@ -76,7 +76,7 @@ def uhlenbeck_integrals() -> list[FirstIntegral]:
     return out
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Neumann problem: eq. (2504-13) at α = 1, β = 0.
 

@@ -95,7 +95,7 @@ def measure_density(g: sp.Matrix = gamma) -> sp.Expr:
     return sp.sqrt(dot(g, J_inv * g))
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The rubber ball with the potential ``potential`` (a key of :data:`POTENTIALS`).
 

@@ -85,7 +85,7 @@ def equations_of_motion(U: sp.Expr, mu: sp.Expr) -> tuple[sp.Expr, ...]:
     return tuple(omega_dot) + tuple(cross(gamma, omega))
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Veselova system with ``potential`` (a key of :data:`POTENTIALS`)."""
     pot = resolve(POTENTIALS, potential)

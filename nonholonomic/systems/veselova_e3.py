@@ -79,7 +79,7 @@ def hamiltonian() -> sp.Expr:
     return alpha * hamiltonian_alpha() + beta * hamiltonian_beta()
 
 
-@lru_cache(maxsize=256)
+@lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Eq. (2504-12) on e(3), rhs ``dx/dt = {H, x}`` derived by sympy.
 
