@@ -172,6 +172,55 @@ def test_fuzzed_job_requests_never_give_a_500(fuzz_client, catalog):
     assert seen.get(202, 0) >= EXAMPLES // 10 and seen.get(422, 0) >= EXAMPLES // 10, seen  # both paths exercised
 
 
+def _grammar(names: list[str]) -> st.SearchStrategy[str]:
+    """Expressions in ``names``: mostly smooth, now and then abs, sign, cot, a huge literal, broken syntax."""
+    atoms = st.one_of(st.sampled_from(names * 3 + ["1", "0.5", "2", "pi", "0"]),
+                      st.sampled_from(["1e308", "10**400", "M1", "__class__", "'s'", "q**pi"]),
+                      st.text(alphabet="q+-*/()^.e0123456789 ", min_size=1, max_size=8))
+    functions = ["sin", "cos", "exp", "sqrt", "atan", "tanh"] * 3 + ["abs", "sign", "cot", "sec", "log", "eval"]
+    return st.recursive(atoms, lambda inner: st.one_of(
+        st.tuples(inner, st.sampled_from(["+", "-", "*"] * 3 + ["/", "**", "%"]), inner)
+        .map(lambda t: f"({t[0]}){t[1]}({t[2]})"),
+        st.tuples(st.sampled_from(functions), inner).map(lambda t: f"{t[0]}({t[1]})")), max_leaves=6)
+
+
+@st.composite
+def user_potential_bodies(draw: st.DrawFn, systems: list[dict[str, Any]]) -> dict[str, Any]:
+    """A catalog example with a potential of the user's own (and now and then a claim), short."""
+    entry = draw(st.sampled_from(systems))
+    body = json.loads(json.dumps(entry["example"]))
+    body.update(t_final=draw(st.floats(0.01, 2.0)), samples=draw(st.integers(2, 20)), checks=["integrals"])
+    names = entry["potential_expression"]["variables"] + ["q"]
+    parameters = draw(st.sampled_from([{"q": draw(st.floats(-2, 2))}] * 4 + [{"q": draw(NUMBERS)}, {}, {"D": 1.0}]))
+    body["system"]["potential"] = {"kind": "expression", "U": draw(_grammar(names)), "parameters": parameters}
+    if draw(st.booleans()):
+        components = [c for v in entry["state"] for c in v["components"]]
+        body["claims"] = [{"name": "claim", "expression": draw(_grammar(components))}]
+    return body
+
+
+def test_fuzzed_user_potentials_and_claims_never_give_a_500(fuzz_client, catalog):
+    seen: dict[int, int] = {}
+
+    @settings(FUZZ, max_examples=max(EXAMPLES // 3, 5))
+    @given(body=user_potential_bodies(catalog))
+    def check(body: dict[str, Any]) -> None:
+        r = fuzz_client.post("/v1/jobs", content=json.dumps(body, allow_nan=False),
+                             headers={"content-type": "application/json"})
+        seen[r.status_code] = seen.get(r.status_code, 0) + 1
+        assert r.status_code in (202, 422), (r.status_code, r.text, body)
+        if r.status_code == 422:
+            _assert_problem(r)
+            return
+        view = _finish(fuzz_client, r.headers["location"])
+        assert view["status"] in ("succeeded", "failed", "cancelled"), view
+        if view["status"] == "failed":
+            assert view["error"]["type"] and view["error"]["message"], view
+
+    check()
+    assert seen.get(202, 0) >= 1 and seen.get(422, 0) >= 1, seen  # both paths exercised
+
+
 NAMES = ["x", "y", "z", "a", "b"]
 #: Mostly well-formed pieces, and now and then one the parser must refuse.
 ATOMS = st.one_of(st.sampled_from(NAMES * 3 + ["1", "2.5", "-3", "pi", "0"] * 2),
