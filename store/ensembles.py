@@ -17,6 +17,7 @@ from sqlalchemy import Engine, delete, exists, insert, or_, select, update
 from sqlalchemy.orm import sessionmaker
 
 from store.expiry import Expiry
+from store.statements import autocommit, changed_one
 from store.models import EnsembleChunkRow, EnsembleRow
 
 _PENDING = exists().where(EnsembleChunkRow.ensemble_id == EnsembleRow.id, EnsembleChunkRow.done.is_(False))
@@ -28,6 +29,7 @@ class EnsembleStore:
     def __init__(self, engine: Engine, ttl_s: int) -> None:
         self.engine, self.ttl_s = engine, ttl_s
         self._session = sessionmaker(engine, expire_on_commit=False)
+        self._autocommit = autocommit(engine)
         self._expiry = Expiry(self.delete_expired)
 
     # -- writing ---------------------------------------------------------------------------------
@@ -55,19 +57,17 @@ class EnsembleStore:
             session.execute(delete(EnsembleRow).where(EnsembleRow.id == ensemble_id))
 
     def cancel(self, ensemble_id: str) -> None:
-        with self._session.begin() as session:
-            session.execute(update(EnsembleRow).where(EnsembleRow.id == ensemble_id).values(cancelled=True))
+        changed_one(self._autocommit, update(EnsembleRow).where(EnsembleRow.id == ensemble_id).values(cancelled=True))
 
     def mark_started(self, ensemble_id: str, chunk: int) -> None:
         self._update_chunk(ensemble_id, chunk, starts=EnsembleChunkRow.starts + 1)
 
     def set_progress(self, ensemble_id: str, chunk: int, members_done: int) -> None:
         """The members a running chunk has finished (not for a chunk already done)."""
-        with self._session.begin() as session:
-            session.execute(update(EnsembleChunkRow)
-                            .where(EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk,
-                                   EnsembleChunkRow.done.is_(False))
-                            .values(members_done=members_done))
+        changed_one(self._autocommit, update(EnsembleChunkRow)
+                    .where(EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk,
+                           EnsembleChunkRow.done.is_(False))
+                    .values(members_done=members_done))
 
     def store_chunk(self, ensemble_id: str, chunk: int, members: list[dict[str, Any]],
                     digests: list[dict[str, Any]], worker: str) -> None:
@@ -76,19 +76,16 @@ class EnsembleStore:
                            members_done=len(members))
 
     def _update_chunk(self, ensemble_id: str, chunk: int, **values: Any) -> None:
-        with self._session.begin() as session:
-            session.execute(update(EnsembleChunkRow)
-                            .where(EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk)
-                            .values(**values))
+        changed_one(self._autocommit, update(EnsembleChunkRow)
+                    .where(EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk)
+                    .values(**values))
 
     def resend_claim(self, ensemble_id: str, old_epoch: str | None, broker_epoch: str) -> bool:
         """Claim an ensemble sent in ``old_epoch`` for sending its pending chunks again in
         ``broker_epoch``; True for the one caller that claims it."""
         epoch = EnsembleRow.broker_epoch.is_(None) if old_epoch is None else EnsembleRow.broker_epoch == old_epoch
-        with self._session.begin() as session:
-            done = session.execute(update(EnsembleRow).where(EnsembleRow.id == ensemble_id, epoch)
-                                   .values(broker_epoch=broker_epoch))
-            return done.rowcount == 1  # type: ignore[attr-defined]
+        return changed_one(self._autocommit, update(EnsembleRow).where(EnsembleRow.id == ensemble_id, epoch)
+                           .values(broker_epoch=broker_epoch))
 
     def delete_expired(self) -> int:
         """Delete ensembles created more than ``ttl_s`` ago that ended (no chunk pending, or

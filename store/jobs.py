@@ -19,6 +19,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from store.expiry import Expiry
+from store.statements import autocommit, changed_one
 from store.models import JobRow
 
 _JOBS = JobRow.__table__
@@ -95,7 +96,7 @@ class JobStore:
         self.url, self.ttl_s = url, ttl_s
         self.engine = make_engine(url)
         self._session = sessionmaker(self.engine, expire_on_commit=False)
-        self._autocommit = self.engine.execution_options(isolation_level="AUTOCOMMIT")
+        self._autocommit = autocommit(self.engine)
         self._expiry = Expiry(self.delete_expired)
 
     def migrate(self) -> None:
@@ -132,9 +133,7 @@ class JobStore:
     # round trip, atomic by itself; the hot path of a job is one INSERT, one UPDATE to start, one to end.
 
     def _changed(self, statement: Any) -> bool:
-        """Execute one writing statement; True if it changed exactly one row."""
-        with self._autocommit.connect() as connection:
-            return connection.execute(statement).rowcount == 1
+        return changed_one(self._autocommit, statement)
 
     def create(self, job_id: str, request: dict[str, Any], owner: str | None = None, queue: str | None = None,
                broker_epoch: str | None = None) -> str:

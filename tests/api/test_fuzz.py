@@ -147,25 +147,31 @@ def _finish(client: Any, location: str) -> dict[str, Any]:
     return _strict(client.get(location).text)
 
 
+def _submit_and_end(client: Any, body: dict[str, Any], seen: dict[int, int]) -> tuple[str | None, dict | None]:
+    """POST the job: a 422 problem naming fields, or a 202 whose job ends cleanly (a failure with its
+    reason); counts the status in ``seen``. Returns the location and the last view (None for a 422)."""
+    r = client.post("/v1/jobs", content=json.dumps(body, allow_nan=False), headers={"content-type": "application/json"})
+    seen[r.status_code] = seen.get(r.status_code, 0) + 1
+    assert r.status_code in (202, 422), (r.status_code, r.text, body)
+    if r.status_code == 422:
+        _assert_problem(r)
+        return None, None
+    view = _finish(client, r.headers["location"])
+    assert view["status"] in ("succeeded", "failed", "cancelled"), view
+    if view["status"] == "failed":
+        assert view["error"]["type"] and view["error"]["message"], view
+    return r.headers["location"], view
+
+
 def test_fuzzed_job_requests_never_give_a_500(fuzz_client, catalog):
     seen: dict[int, int] = {}
 
     @FUZZ
     @given(body=job_bodies(catalog))
     def check(body: dict[str, Any]) -> None:
-        r = fuzz_client.post("/v1/jobs", content=json.dumps(body, allow_nan=False),
-                             headers={"content-type": "application/json"})
-        seen[r.status_code] = seen.get(r.status_code, 0) + 1
-        assert r.status_code in (202, 422), (r.status_code, r.text, body)
-        if r.status_code == 422:
-            _assert_problem(r)
-            return
-        view = _finish(fuzz_client, r.headers["location"])
-        assert view["status"] in ("succeeded", "failed", "cancelled"), view
-        if view["status"] == "failed":
-            assert view["error"]["type"] and view["error"]["message"], view
-        if view["status"] == "succeeded":
-            export = fuzz_client.get(f"{r.headers['location']}/trajectory?format=csv")
+        location, view = _submit_and_end(fuzz_client, body, seen)
+        if view is not None and view["status"] == "succeeded":
+            export = fuzz_client.get(f"{location}/trajectory?format=csv")
             assert export.status_code == 200 and "nan" not in export.text.lower()
 
     check()
@@ -205,17 +211,7 @@ def test_fuzzed_user_potentials_and_claims_never_give_a_500(fuzz_client, catalog
     @settings(FUZZ, max_examples=max(EXAMPLES // 3, 5))
     @given(body=user_potential_bodies(catalog))
     def check(body: dict[str, Any]) -> None:
-        r = fuzz_client.post("/v1/jobs", content=json.dumps(body, allow_nan=False),
-                             headers={"content-type": "application/json"})
-        seen[r.status_code] = seen.get(r.status_code, 0) + 1
-        assert r.status_code in (202, 422), (r.status_code, r.text, body)
-        if r.status_code == 422:
-            _assert_problem(r)
-            return
-        view = _finish(fuzz_client, r.headers["location"])
-        assert view["status"] in ("succeeded", "failed", "cancelled"), view
-        if view["status"] == "failed":
-            assert view["error"]["type"] and view["error"]["message"], view
+        _submit_and_end(fuzz_client, body, seen)
 
     check()
     assert seen.get(202, 0) >= 1 and seen.get(422, 0) >= 1, seen  # both paths exercised
