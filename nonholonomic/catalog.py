@@ -9,7 +9,7 @@ from nonholonomic.definition import Parameter
 from nonholonomic.isomorphisms import maps_for
 from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, potential_symbols
 from nonholonomic.simulation import available_checks
-from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system, own_names, user_potential
+from nonholonomic.systems import SUPPORTED_POTENTIALS, SURFACE_KINDS, SYSTEMS, get_system, own_names, user_potential
 
 
 def _parameter(par: Parameter) -> dict[str, Any]:
@@ -55,6 +55,10 @@ def describe(kind: str) -> dict[str, Any]:
             "max_length": MAX_EXPRESSION_LENGTH, "max_parameters": MAX_EXPRESSION_PARAMETERS,
             "reserved_names": sorted(own_names(kind)),
             "example": {"kind": EXPRESSION, "U": f"q*{variables[-1]}**2", "parameters": {"q": 0.5}}},
+        "surface_expression": None if kind not in SURFACE_KINDS else {
+            "variables": list(module.SURFACE_VARIABLES), "formula": "Phi(x) = <expression> = 0",
+            "max_length": MAX_EXPRESSION_LENGTH, "max_parameters": MAX_EXPRESSION_PARAMETERS,
+            "reserved_names": sorted(own_names(kind)), "example": module.EXAMPLE["system"]["surface"]},
         "state": [{"name": v.name, "components": [str(s) for s in v.symbols], "meaning": v.meaning, "unit": v.unit}
                   for v in base.state],
         "alternative_inputs": [{"name": a.name, "replaces": a.replaces, "formula": a.formula}
@@ -77,5 +81,14 @@ def describe(kind: str) -> dict[str, Any]:
 
 
 def catalog() -> dict[str, Any]:
-    """The whole catalog: one entry per system kind."""
-    return {"systems": [describe(kind) for kind in SYSTEMS]}
+    """The whole catalog: one entry per system kind, and how to pose a generalized Chaplygin system."""
+    from nonholonomic.systems import generalized_chaplygin as gc
+
+    return {"systems": [describe(kind) for kind in SYSTEMS], "generalized_chaplygin": {
+        "kind": gc.KIND, "title": gc.TITLE, "equation": "2704-7, 2704-8, 2704-9 (Theorem 1)",
+        "fields": {"coordinates": "names of q1, q2", "velocities": "names of q1dot, q2dot",
+                   "parameters": "every constant of the expressions, with its value",
+                   "lagrangian": "L(q, qdot), quadratic in the velocities",
+                   "a1": "S = a1(q) q1dot + a2(q) q2dot + b(q)", "a2": "see a1", "b": "see a1",
+                   "potential": "U(q) subtracted from L (optional)"},
+        "state": ["q", "qdot"], "checks": ["integrals", "measure", "bracket"], "example": gc.EXAMPLE_JOB}}

@@ -210,11 +210,16 @@ class FirstIntegral:
 
 @dataclass(frozen=True)
 class Projection:
-    """How to move a state onto a constraint: replace the vector ``vector`` by ``expression``."""
+    """How to move a state onto a constraint: replace the vector ``vector`` by ``expression``.
+
+    ``steps`` > 1 makes it an iteration (Newton's steps onto a curved surface): it is applied again
+    until the constraint holds, at most ``steps`` times.
+    """
 
     vector: str
     expression: tuple[sp.Expr, ...]
     formula: str
+    steps: int = 1
 
 
 @dataclass(frozen=True)
@@ -237,9 +242,13 @@ class StateConstraint:
 
 @dataclass(frozen=True)
 class InvariantMeasure:
-    """A claimed invariant measure ``density · d(state)``: ``div(density · f) = 0``."""
+    """A claimed invariant measure ``density · d(state)``: ``div(density · f) = 0``.
 
-    density: sp.Expr
+    ``density`` None: no measure is claimed (a user's generalized Chaplygin system for which Theorem 1
+    finds none); ``formula`` says why.
+    """
+
+    density: sp.Expr | None
     formula: str
     equation: str
 
@@ -278,6 +287,9 @@ class MechanicalSystem:
     alternative_inputs: tuple[AlternativeInput, ...] = ()
     constraints: tuple[StateConstraint, ...] = ()
     notes: tuple[str, ...] = field(default=())
+    hamiltonian_form: Any = field(default=None, compare=False)
+    """A Hamiltonian form after a time substitution that comes with the definition (Theorem 1's for a
+    user's generalized Chaplygin system), a :class:`nonholonomic.hamiltonization.HamiltonianForm`."""
 
     @property
     def state_symbols(self) -> tuple[sp.Symbol, ...]:

@@ -97,6 +97,9 @@ class HamiltonianForm:
     formula: str
     equation: str
     extra_integrals: tuple[tuple[str, sp.Expr, str], ...] = ()
+    proof: tuple[bool | None, str] | None = None
+    """The symbolic flow identity's verdict when it comes with the form (Theorem 1 for a user's
+    system); None: proved here on the leaf (:func:`symbolic_flow_identity`)."""
 
 
 # --- the forms ------------------------------------------------------------------------------------
@@ -195,6 +198,8 @@ def hamiltonian_form(system: MechanicalSystem) -> HamiltonianForm | None:
     system : a Veselova (eq. 2504-10-2, 2504-11) or Chaplygin-ball (eq. 2604-5 … 2604-7) system
         with any of its potentials; other kinds give None.
     """
+    if system.hamiltonian_form is not None:
+        return system.hamiltonian_form  # type: ignore[no-any-return]
     if system.kind == "veselova":
         return _veselova_form(system)
     if system.kind == "chaplygin_ball":
@@ -452,6 +457,8 @@ def symbolic_flow_identity(form: HamiltonianForm, system: MechanicalSystem,
 
     The proof keeps running after a timeout; later calls get its result (:mod:`nonholonomic.bounded`).
     """
+    if form.proof is not None:
+        return form.proof
     return bounded.prove(("flow", form, system), _prove_flow, (form, system), budget_s)
 
 

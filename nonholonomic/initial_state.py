@@ -64,6 +64,10 @@ def _name_problems(system: MechanicalSystem, initial_state: Mapping[str, Sequenc
         elif len(givers) > 1:
             problems.append(FieldProblem(f"initial_state.{givers[1]}",
                                          f"give only one of {', '.join(givers)}: they describe the same state"))
+    sizes = {v.name: len(v.symbols) for v in system.state} | {a.name: len(a.symbols) for a in system.alternative_inputs}
+    for key, value in initial_state.items():
+        if key in sizes and len(value) != sizes[key]:
+            problems.append(FieldProblem(f"initial_state.{key}", f"needs {sizes[key]} components, got {len(value)}"))
     return problems
 
 
@@ -78,10 +82,13 @@ def project_initial_state(system: MechanicalSystem, p: np.ndarray,
             continue
         before = float(kernels.constraints(y[None, :], p)[0, i])
         where = vector_slice(system, constraint.projection.vector)  # type: ignore[union-attr]
-        new = project(y[None, :], p)[0]
-        change = float(np.max(np.abs(new - y[where])))
-        y[where] = new
-        after = float(kernels.constraints(y[None, :], p)[0, i])
+        start = y[where].copy()
+        for _ in range(constraint.projection.steps):  # type: ignore[union-attr]
+            y[where] = project(y[None, :], p)[0]
+            after = float(kernels.constraints(y[None, :], p)[0, i])
+            if abs(after - constraint.value) <= 1e-3 * constraint.tolerance or not np.isfinite(after):
+                break
+        change = float(np.max(np.abs(y[where] - start)))
         if change > 0:
             reports.append(ProjectionReport(f"initial_state.{constraint.field}", constraint.formula,
                                             constraint.projection.formula, before, after, change))  # type: ignore[union-attr]
@@ -126,19 +133,26 @@ def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, ob
 
 def potential_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
     """A user's potential (``potential == "expression"``) whose gradient, so the field, is not finite at
-    the initial state: refused before anything runs, naming ``system.potential.U``."""
-    if system.potential != "expression":
+    the initial state: refused before anything runs, naming ``system.potential.U``; for a user's
+    generalized Chaplygin system, any field not finite there (det G = 0 ...), naming ``initial_state.q``."""
+    if system.kind == "generalized_chaplygin":
+        field = "initial_state.q"
+    elif system.potential != "expression":
         return []
+    else:
+        field = "system.potential.U"
+    what = "; ".join(system.notes[:2]) if system.kind == "generalized_chaplygin" else system.potential_formula
     try:
         with np.errstate(all="ignore"):
             f = numeric(system).rhs_single(np.asarray(y, dtype=float), p)
     except Exception as exc:  # noqa: BLE001 - whatever numpy cannot evaluate is the user's U's problem
-        return [FieldProblem("system.potential.U", f"{system.potential_formula}: cannot be evaluated at the initial "
-                                                   f"state ({type(exc).__name__}: {exc})")]
+        return [FieldProblem(field, f"{what}: cannot be evaluated at the initial state ({type(exc).__name__}: {exc})")]
     if np.all(np.isfinite(f)):
         return []
-    return [FieldProblem("system.potential.U", f"{system.potential_formula}: its gradient is not finite at the "
-                                               "initial state (a singularity there); choose another U or state")]
+    why = ("the field is not finite at the initial state: the kinetic matrix d2L/dqdot2 is singular there, or L, "
+           "S or U is" if system.kind == "generalized_chaplygin" else
+           "its gradient is not finite at the initial state (a singularity there); choose another U or state")
+    return [FieldProblem(field, f"{what}: {why}")]
 
 
 def parameter_warnings(system: MechanicalSystem, parameters: Mapping[str, object]) -> list[str]:

@@ -60,7 +60,8 @@ class NumericSystem:
 
     @cached_property
     def density(self) -> VectorKernel:
-        return vectorize([self.system.measure.density], self._args)
+        """``ρ`` of the invariant measure (1 where none is claimed)."""
+        return vectorize([_claimed(self.system.measure.density)], self._args)
 
     @cached_property
     def time_density(self) -> VectorKernel:
@@ -82,7 +83,7 @@ class NumericSystem:
     @cached_property
     def divergence_terms(self) -> VectorKernel:
         """Columns ``∂(ρ f_i)/∂x_i``: their sum is ``div(ρ f)``, their absolute sum its natural scale."""
-        return vectorize(divergence_terms(self.system, self.system.measure.density), self._args)
+        return vectorize(divergence_terms(self.system, _claimed(self.system.measure.density)), self._args)
 
     @cached_property
     def constraints(self) -> VectorKernel:
@@ -97,6 +98,10 @@ class NumericSystem:
     def rhs_single(self, y: np.ndarray, p: np.ndarray) -> np.ndarray:
         """``f(y)`` for one phase point (shape ``(dim,)``)."""
         return self.rhs(y[None, :], p)[0]
+
+
+def _claimed(density: sp.Expr | None) -> sp.Expr:
+    return sp.Integer(1) if density is None else density
 
 
 def divergence_terms(system: MechanicalSystem, density: sp.Expr) -> list[sp.Expr]:

@@ -23,9 +23,15 @@ LOCAL_FORM_KINDS = frozenset({"veselova", "chaplygin_ball"})
 MAX_POINTS = 50
 
 
+#: Kinds whose Hamiltonian form comes with the definition, when Theorem 1 gives one (else the check
+#: says why not).
+THEOREM_1_KINDS = frozenset({"generalized_chaplygin"})
+
+
 def structural_checks(kind: str) -> tuple[str, ...]:
     """The structural checks available for ``kind``."""
-    return (("bracket",) if kind in HAMILTONIAN_KINDS else ()) + (("euler_angles",) if kind in LOCAL_FORM_KINDS else ())
+    return ((("bracket",) if kind in HAMILTONIAN_KINDS | THEOREM_1_KINDS else ())
+            + (("euler_angles",) if kind in LOCAL_FORM_KINDS else ()))
 
 
 def _thin(states: np.ndarray) -> np.ndarray:
@@ -51,6 +57,10 @@ def bracket_evidence(system: MechanicalSystem, parameters: np.ndarray, states: n
     from nonholonomic.hamiltonization import hamiltonian_form, hamiltonian_form_evidence
 
     points = _thin(states)
+    if hamiltonian_form(system) is None:  # a user's system without Theorem 1's multiplier
+        return [CheckEvidence(name="hamiltonian_flow", quantity="d y/d tau - {H, y}", formula="none",
+                              equation=system.equation, method="symbolic", residual=None, tolerance=None, passed=None,
+                              detail="no Hamiltonian form: " + system.measure.formula)]
     items = hamiltonian_form_evidence(system, parameters, points)
     to_bracket, where = _to_bracket_variables(system)
     form = hamiltonian_form(system)

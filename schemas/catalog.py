@@ -51,6 +51,17 @@ class CatalogExpressionPotential(_Strict):
     example: dict[str, Any]
 
 
+class CatalogSurfaceExpression(_Strict):
+    """How to write the surface of a ``ball_on_surface``: ``{"Phi": ..., "parameters": {...}}``."""
+
+    variables: list[str] = Field(description="the names Phi may use besides its own parameters")
+    formula: str
+    max_length: int = Field(description="longest Phi (characters)")
+    max_parameters: int
+    reserved_names: list[str] = Field(description="names a parameter of Phi may not take (the system's own)")
+    example: dict[str, Any]
+
+
 class CatalogStateVector(_Strict):
     name: str
     components: list[str]
@@ -112,6 +123,8 @@ class SystemDescription(_Strict):
     potential_expression: CatalogExpressionPotential = Field(
         description="a potential written as an expression; integrals claimed for it are those whose "
                     "claimed_for_potentials lists 'expression'")
+    surface_expression: CatalogSurfaceExpression | None = Field(
+        description="for ball_on_surface: the surface Phi(x) = 0 written as an expression (null for other kinds)")
     state: list[CatalogStateVector]
     alternative_inputs: list[CatalogAlternativeInput]
     derived: list[CatalogDerivedVector]
@@ -126,7 +139,20 @@ class SystemDescription(_Strict):
     time_unit: str
 
 
+class CatalogGeneralizedChaplygin(_Strict):
+    """A generalized Chaplygin system of one's own (eq. 2704-7) as a job's ``system``."""
+
+    kind: str
+    title: str
+    equation: str
+    fields: dict[str, str] = Field(description="what each field of the system block holds")
+    state: list[str] = Field(description="the initial state's vectors (two components each)")
+    checks: list[str]
+    example: dict[str, Any] = Field(description="a runnable job: Veselova's system in Euler angles")
+
+
 class Catalog(_Strict):
-    """``GET /v1/systems``: one entry per kind."""
+    """``GET /v1/systems``: one entry per kind, and the generalized Chaplygin system of one's own."""
 
     systems: list[SystemDescription]
+    generalized_chaplygin: CatalogGeneralizedChaplygin

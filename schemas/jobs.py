@@ -17,7 +17,7 @@ from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.report import PaperReport
 from schemas.settings import get_settings
 from schemas.results import SimulationResultModel
-from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
+from schemas.systems import FiniteFloat, JobSystemSpec, StateVec
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 TERMINAL_STATUSES: frozenset[str] = frozenset({"succeeded", "failed", "cancelled"})
@@ -67,8 +67,8 @@ class JobRequest(BaseModel):
             "t_final": 20.0, "samples": 201, "checks": ["integrals", "measure"]}]},
     )
 
-    system: AnySystemSpec
-    initial_state: dict[str, Vec3] = Field(
+    system: JobSystemSpec
+    initial_state: dict[str, StateVec] = Field(
         description="state vectors by name (the catalog lists them), e.g. {'M': [..], 'gamma': [..]}; "
                     "for the ball 'omega' may replace 'M'")
     t_final: FiniteFloat = Field(gt=0, description="end of the integration interval [0, t_final], in s")
@@ -102,7 +102,7 @@ class JobRequest(BaseModel):
 
     def problems(self) -> list[FieldProblem]:
         """Violations only the physics can see: state names, |γ| = 1, the engine's tolerance range."""
-        system = self.system.definition()  # type: ignore[attr-defined]
+        system = self.system.validation_definition()  # type: ignore[attr-defined]
         found = [FieldProblem(f"checks[{i}]", f"{check!r} is not available for {system.kind}; "
                                               f"available: {', '.join(available_checks(system))}")
                  for i, check in enumerate(self.checks) if check not in available_checks(system)]

@@ -9,18 +9,31 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    create_model,
+    field_validator,
+)
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
 from nonholonomic.expressions import ExpressionError, declare_symbols
 from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, Potential
-from nonholonomic.systems import POTENTIAL_NAMES, SYSTEMS, get_system, own_names, user_potential
+from nonholonomic.systems import POTENTIAL_NAMES, SURFACE_KINDS, SYSTEMS, get_system, own_names, user_potential
+from nonholonomic.systems import generalized_chaplygin as gc
+from nonholonomic.systems.ball_on_surface import SURFACE_VARIABLES, Surface, surface
+from nonholonomic.systems.generalized_chaplygin import EXAMPLE as GENERALIZED_CHAPLYGIN_EXAMPLE
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 #: Admissible state components (initial states, vectors): beyond, the equations' products overflow.
 MAX_STATE_MAGNITUDE = 1e12
 StateFloat = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_STATE_MAGNITUDE, le=MAX_STATE_MAGNITUDE)]
 Vec3 = Annotated[list[StateFloat], Field(min_length=3, max_length=3)]
+#: A state vector of an initial state: 3 components, 2 for a generalized Chaplygin system's q and qdot.
+StateVec = Annotated[list[StateFloat], Field(min_length=2, max_length=3)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 
 
@@ -146,20 +159,82 @@ def _keep_client_names(schema: dict[str, Any], cls: type) -> None:
         properties["d"] = dict(_LOWER_D)
 
 
+class SurfaceSpec(BaseModel):
+    """The surface Φ(x) = 0 on which the ball's centre moves, as an expression (parsed without eval)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    parameters: dict[str, ParameterFloat] = Field(
+        default_factory=dict, max_length=MAX_EXPRESSION_PARAMETERS,
+        description="values of Phi's own parameters by name (not a name of the system's or of the potential's)")
+    Phi: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
+                     description=f"Phi as an expression in {', '.join(SURFACE_VARIABLES)} and the parameters; the "
+                                 "centre of the ball moves on Phi(x) = 0, with normal grad Phi/|grad Phi|")
+
+    @field_validator("parameters")
+    @classmethod
+    def _names(cls, values: dict[str, float]) -> dict[str, float]:
+        try:
+            declare_symbols(list(values))
+        except ExpressionError as exc:
+            raise ValueError(str(exc)) from None
+        taken = sorted(set(values) & (own_names("ball_on_surface") | set(SURFACE_VARIABLES)))
+        if taken:
+            raise ValueError(f"{', '.join(taken)}: already a name of ball_on_surface (its parameters or state); "
+                             "choose another")
+        return values
+
+    @field_validator("Phi")
+    @classmethod
+    def _parsed(cls, text: str, info: ValidationInfo) -> str:
+        if "parameters" not in info.data:
+            return text  # the parameters are refused already
+        try:
+            surface(text, tuple(sorted(info.data["parameters"])))
+        except ExpressionError as exc:
+            raise ValueError(str(exc)) from None
+        return text
+
+    def core(self) -> Surface:
+        """The core's :class:`nonholonomic.systems.ball_on_surface.Surface`."""
+        return surface(self.Phi, tuple(sorted(self.parameters)))
+
+
 class SystemSpec(BaseModel):
-    """Base of the system models: ``kind``, the system's parameters and ``potential``."""
+    """Base of the system models: ``kind``, the system's parameters and ``potential`` (and, for a ball
+    on a surface of the user's own, ``surface``)."""
 
     model_config = ConfigDict(extra="forbid", json_schema_extra=_keep_client_names)
 
     def parameter_values(self) -> dict[str, Any]:
-        """Every parameter group by name, the potential's included (the core's input)."""
-        values = self.model_dump(exclude={"kind", "potential"})
+        """Every parameter group by name, the potential's and the surface's included (the core's input)."""
+        values = self.model_dump(exclude={"kind", "potential", "surface"})
         values.update(self.potential.parameter_values())  # type: ignore[attr-defined]
+        if getattr(self, "surface", None) is not None:
+            values.update(self.surface.parameters)  # type: ignore[attr-defined]
         return values
 
     def definition(self) -> MechanicalSystem:
-        """The core's symbolic definition for this kind and potential."""
-        return get_system(self.kind, self.potential.core(self.kind))  # type: ignore[attr-defined]
+        """The core's symbolic definition for this kind and potential (and surface)."""
+        on = getattr(self, "surface", None)
+        return get_system(self.kind, self.potential.core(self.kind),  # type: ignore[attr-defined]
+                          None if on is None else on.core())
+
+    def validation_definition(self) -> MechanicalSystem:
+        """The definition a request is checked against (the same as :meth:`definition` but for kinds whose
+        definition runs heavy symbolic work)."""
+        return self.definition()
+
+
+def _names_apart(cls: type, potential: PotentialSpec, info: ValidationInfo) -> PotentialSpec:
+    """A surface's parameters and a potential's may not share a name (they are one list of values)."""
+    if "surface" not in info.data:
+        return potential  # the surface is refused already
+    shared = sorted(set(info.data["surface"].parameters) & set(potential.parameter_values()))
+    if shared:
+        raise ValueError(f"{', '.join(shared)}: a parameter of the surface too; give the potential's and the "
+                         "surface's parameters different names")
+    return potential
 
 
 def _potential_model(kind: str, pot: Potential) -> type[PotentialSpec]:
@@ -177,12 +252,18 @@ def _system_model(kind: str) -> type[SystemSpec]:
     allowed = [_potential_model(kind, pot) for pot in module.POTENTIALS.values()] + [_expression_model(kind)]
     potential_union = Annotated[Union[tuple(allowed)], Field(discriminator="kind")]  # type: ignore[valid-type]
     default, default_kind = allowed[0], next(iter(module.POTENTIALS))
+    extra: dict[str, Any] = {}
+    if kind in SURFACE_KINDS:
+        extra["surface"] = (SurfaceSpec, Field(description="the surface Phi(x) = 0 on which the centre moves"))
     return create_model(  # type: ignore[call-overload]
         f"{_camel(kind)}Spec",
         __base__=SystemSpec,
         __doc__=module.TITLE,
+        __validators__=({"names_apart": field_validator("potential")(classmethod(_names_apart))}  # type: ignore[arg-type]
+                        if kind in SURFACE_KINDS else None),
         kind=(Literal[kind], ...),
         **{par.name: _parameter_field(par) for par in module.PARAMETERS},
+        **extra,
         potential=(potential_union, Field(default_factory=lambda: default(kind=default_kind),
                                           description=f"one of: {', '.join(module.POTENTIALS)}, {EXPRESSION} "
                                                       f"(default {list(module.POTENTIALS)[0]})")),
@@ -196,3 +277,79 @@ AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discrimina
 def definition_of(system_json: dict[str, Any]) -> MechanicalSystem:
     """The core's definition of a stored (already validated) request's ``system`` block."""
     return SYSTEM_MODELS[system_json["kind"]].model_validate(system_json).definition()
+
+
+# --------------------------------------------------------------------------------------------------
+# a generalized Chaplygin system of the user's own (jobs only)
+
+
+class GeneralizedChaplyginSpec(SystemSpec):
+    """A generalized Chaplygin system with two degrees of freedom (eq. 2704-7), as in POST /v1/hamiltonize:
+    L(q, qdot), S = a1(q) q1dot + a2(q) q2dot + b(q), an optional U(q), every constant a parameter with a
+    value. Integrated in t, and in tau with its Hamiltonian form when Theorem 1 gives a reducing multiplier."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [GENERALIZED_CHAPLYGIN_EXAMPLE]})
+
+    kind: Literal["generalized_chaplygin"]
+    coordinates: list[Annotated[str, Field(min_length=1, max_length=32)]] = Field(
+        min_length=2, max_length=2, description="names of q1, q2 (the state vector q of the initial state)")
+    velocities: list[Annotated[str, Field(min_length=1, max_length=32)]] = Field(
+        min_length=2, max_length=2, description="names of q1dot, q2dot (the state vector qdot)")
+    parameters: dict[str, ParameterFloat] = Field(
+        default_factory=dict, max_length=MAX_EXPRESSION_PARAMETERS,
+        description="every constant of the expressions, by name, with its value")
+    lagrangian: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
+                            description="L(q, qdot), a polynomial of degree 2 in the velocities (Theorem 1)")
+    a1: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
+                    description="S = a1(q) q1dot + a2(q) q2dot + b(q) (eq. 2704-7)")
+    a2: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH)
+    b: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH)
+    potential: str | None = Field(None, max_length=MAX_EXPRESSION_LENGTH,
+                                  description="U(q), subtracted from L (null: none, or already in L)")
+
+    @field_validator("coordinates", "velocities", "parameters")
+    @classmethod
+    def _names(cls, value: Any, info: ValidationInfo) -> Any:
+        order = ("coordinates", "velocities", "parameters")
+        names = {k: tuple(info.data.get(k, ())) for k in order[:order.index(info.field_name)]}
+        names[info.field_name] = tuple(value)
+        try:
+            gc.declared(*(names.get(k, ()) for k in order))
+        except gc.DataError as exc:
+            if exc.field == info.field_name:
+                raise ValueError(exc.reason) from None
+        return value
+
+    @field_validator("lagrangian", "a1", "a2", "b", "potential")
+    @classmethod
+    def _parsed(cls, text: str | None, info: ValidationInfo) -> str | None:
+        if text is None or any(k not in info.data for k in ("coordinates", "velocities", "parameters")):
+            return text  # the names are refused already
+        try:
+            symbols = gc.declared(tuple(info.data["coordinates"]), tuple(info.data["velocities"]),
+                                  tuple(info.data["parameters"]))
+            gc.parse_field(info.field_name, text, symbols, tuple(info.data["velocities"]))
+        except gc.DataError as exc:
+            raise ValueError(exc.reason) from None
+        return text
+
+    def parameter_values(self) -> dict[str, Any]:
+        return dict(self.parameters)
+
+    def data(self) -> gc.ChaplyginData:
+        """The core's parsed system."""
+        return gc.chaplygin_data(self.lagrangian, tuple(self.coordinates), tuple(self.velocities), self.a1, self.a2,
+                                 self.b, self.potential, tuple(self.parameters))
+
+    def definition(self) -> MechanicalSystem:
+        """The system with Theorem 1's measure, time and Hamiltonian form (symbolic work, up to 20 s)."""
+        return gc.define(self.data())
+
+    def validation_definition(self) -> MechanicalSystem:
+        """The system without Theorem 1 (enough to check a request: names, state, the field at it)."""
+        return gc.define(self.data(), reduce=False)
+
+
+#: What POST /v1/jobs takes as ``system``: every kind of the catalog and a generalized Chaplygin system.
+JobSystemSpec = Annotated[Union[(*SYSTEM_MODELS.values(), GeneralizedChaplyginSpec)],  # type: ignore[valid-type]
+                          Field(discriminator="kind")]

@@ -40,7 +40,7 @@ from matplotlib.ticker import MaxNLocator
 
 from nonholonomic.definition import MechanicalSystem, StateConstraint, StateVector
 from nonholonomic.potentials import EXPRESSION
-from nonholonomic.systems import get_system
+from nonholonomic.systems import SURFACE_KINDS, get_system
 
 JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov")
 ENSEMBLE_PLOTS: tuple[str, ...] = ("poincare", "exponents")
@@ -212,12 +212,25 @@ def _bucket_max(y: np.ndarray, limit: int = MAX_LINE_POINTS) -> np.ndarray:
 # --------------------------------------------------------------------------- geometry from the definition
 
 
-def _definition(system_info: Mapping[str, Any]) -> MechanicalSystem:
+def _definition(system_info: Mapping[str, Any], request: Mapping[str, Any] | None = None) -> MechanicalSystem:
     """The core's definition of a result's ``system`` block, for its geometry (state vectors and
-    constraints, which a user's potential does not change)."""
+    constraints, which a user's potential does not change; a user's surface, from the ``request``, does)."""
     potential = system_info.get("potential", "zero")
+    surface = None
+    if system_info["kind"] == "generalized_chaplygin":  # the user's system lives in the request
+        from schemas.systems import GeneralizedChaplyginSpec
+
+        if request is None or "system" not in request:
+            raise PlotUnavailable("the system of this result is in its request, which is not given")
+        return GeneralizedChaplyginSpec.model_validate(request["system"]).validation_definition()
+    if system_info["kind"] in SURFACE_KINDS:
+        from schemas.systems import SurfaceSpec
+
+        if request is None or "surface" not in request.get("system", {}):
+            raise PlotUnavailable("the surface of this result is in its request, which is not given")
+        surface = SurfaceSpec.model_validate(request["system"]["surface"]).core()
     try:
-        return get_system(system_info["kind"], "zero" if potential == EXPRESSION else potential)
+        return get_system(system_info["kind"], "zero" if potential == EXPRESSION else potential, surface)
     except KeyError as exc:
         raise PlotUnavailable(f"cannot rebuild the system of this result: {exc}") from None
 
@@ -279,20 +292,23 @@ def _vector_samples(trajectory: Mapping[str, Any], name: str) -> np.ndarray:
 # --------------------------------------------------------------------------- job plots
 
 
-def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | None = None) -> Figure:
-    """The geometric vector on its sphere or ellipsoid (3-D) and the momentum-like vector against t."""
-    info = result["system"]
-    units = info.get("units", {})
-    system = _definition(info)
-    trajectory = result["trajectory"]
-    t = np.asarray(trajectory["t"], dtype=float)
-    geometric, constraint = _geometric_vector(system)
-    momentum = _momentum_vector(system, geometric)
-    g = _vector_samples(trajectory, geometric.name)
-    keep = _thin(len(t))
+def _plane_orbit(ax: Any, g: np.ndarray, keep: np.ndarray, t: np.ndarray, geometric: StateVector,
+                 units: Mapping[str, str]) -> None:
+    """The orbit of a 2-component state vector (q1, q2) in its plane."""
+    ax.plot(g[keep, 0], g[keep, 1], color="C0", linewidth=0.7, in_layout=False)
+    ax.plot(*g[0], marker="o", color="C2", markersize=4, linestyle="none", label="t = 0")
+    ax.plot(*g[-1], marker="s", color="C3", markersize=4, linestyle="none", label=f"t = {t[-1]:g} s")
+    names = [str(s) for s in geometric.symbols]
+    ax.set_xlabel(f"{names[0]} [{units.get(geometric.name, '')}]")
+    ax.set_ylabel(f"{names[1]} [{units.get(geometric.name, '')}]")
+    ax.set_title(f"{_symbol(geometric.name)} = ({names[0]}, {names[1]})\n{geometric.meaning}")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left")
 
-    fig = _new_figure(11.0, 4.8)
-    ax3 = fig.add_subplot(1, 2, 1, projection="3d")
+
+def _space_orbit(ax3: Any, g: np.ndarray, keep: np.ndarray, t: np.ndarray, geometric: StateVector,
+                 constraint: StateConstraint | None, info: Mapping[str, Any], units: Mapping[str, str]) -> None:
+    """The orbit of a 3-vector in space, on its sphere or ellipsoid when it has one."""
     mesh = _surface_mesh(constraint, info.get("parameters", {}))
     if mesh is not None:
         ax3.plot_wireframe(*mesh, color="0.55", linewidth=0.3, alpha=0.35, in_layout=False)
@@ -309,6 +325,25 @@ def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | N
     where = (f" on {constraint.formula.split(':')[0]} (eq. {constraint.equation})" if constraint else "")
     ax3.set_title(f"{_symbol(geometric.name)}{where}\n{geometric.meaning}")
     ax3.legend(loc="upper left")
+
+
+def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | None = None) -> Figure:
+    """The geometric vector on its sphere or ellipsoid (3-D) and the momentum-like vector against t."""
+    info = result["system"]
+    units = info.get("units", {})
+    system = _definition(info, request)
+    trajectory = result["trajectory"]
+    t = np.asarray(trajectory["t"], dtype=float)
+    geometric, constraint = _geometric_vector(system)
+    momentum = _momentum_vector(system, geometric)
+    g = _vector_samples(trajectory, geometric.name)
+    keep = _thin(len(t))
+
+    fig = _new_figure(11.0, 4.8)
+    if g.shape[1] == 2:  # generalized coordinates (q1, q2): the orbit in the plane
+        _plane_orbit(fig.add_subplot(1, 2, 1), g, keep, t, geometric, units)
+    else:
+        _space_orbit(fig.add_subplot(1, 2, 1, projection="3d"), g, keep, t, geometric, constraint, info, units)
 
     ax = fig.add_subplot(1, 2, 2)
     if momentum is not None:
@@ -336,7 +371,7 @@ def _integrals_figure(result: Mapping[str, Any], request: Mapping[str, Any]) -> 
         job = JobRequest.model_validate(request)
     except ValueError as exc:
         raise PlotUnavailable(f"the job's request does not rebuild a system: {exc}") from None
-    system = job.system.definition()  # type: ignore[attr-defined]
+    system = job.system.validation_definition()  # type: ignore[attr-defined]
     if not system.integrals:
         raise PlotUnavailable(f"{system.kind} claims no first integral")
     trajectory = result["trajectory"]

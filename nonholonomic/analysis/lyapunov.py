@@ -486,7 +486,8 @@ def _finish(system: MechanicalSystem, p: np.ndarray, acc: _Accumulator, end_stat
 
     measure = system.measure
     with np.errstate(all="ignore"):
-        rho = numeric(system).density(np.vstack([acc.state_start, end_state]), p)[:, 0]
+        rho = (np.full(2, np.nan) if measure.density is None else
+               numeric(system).density(np.vstack([acc.state_start, end_state]), p)[:, 0])
     if np.all(np.isfinite(rho)) and np.all(rho > 0):
         measure_average: float | None = float(-(math.log(rho[1]) - math.log(rho[0])) / span)
         consistent: bool | None = abs(total - measure_average) <= MEASURE_TOLERANCE * scale

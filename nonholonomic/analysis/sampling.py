@@ -307,13 +307,21 @@ def fixable(system: MechanicalSystem) -> tuple[str, ...]:
     KeyError
         If the kind has no sampling recipe.
     """
+    if system.kind not in RECIPES:
+        return ()
     claimed = {claim.name for claim in system.integrals}
     return tuple(name for name in RECIPES[system.kind].fixable if name in claimed)
 
 
 def describe_sampling(system: MechanicalSystem) -> str:
     """One line on how :func:`on_level` draws the states of ``system`` (for the catalog)."""
+    if system.kind not in RECIPES:
+        return _NO_RECIPE
     return RECIPES[system.kind].description(fixable(system))
+
+
+#: Why a kind without a recipe (a ball on the user's surface: its extent is unknown) samples no level.
+_NO_RECIPE = "no states drawn on a level set (the surface is the user's own): give the members' initial states"
 
 
 def _check_request(system: MechanicalSystem, parameters: np.ndarray, level: Mapping[str, float],
@@ -322,6 +330,8 @@ def _check_request(system: MechanicalSystem, parameters: np.ndarray, level: Mapp
         raise LevelError("count", f"must be a positive integer, got {count!r}")
     if isinstance(seed, bool) or not isinstance(seed, Integral) or seed < 0:
         raise LevelError("seed", f"must be a non-negative integer, got {seed!r}")
+    if system.kind not in RECIPES:
+        raise LevelError("level", f"{system.kind}: {_NO_RECIPE}")
     if np.shape(parameters) != (len(system.parameter_symbols),):
         raise ValueError(f"parameters: expected {len(system.parameter_symbols)} values in the order "
                          f"{[str(s) for s in system.parameter_symbols]}, got shape {np.shape(parameters)}")

@@ -46,14 +46,25 @@ class CheckEvidence:
 def divergence_bracket(system: MechanicalSystem, density: sp.Expr) -> sp.Expr:
     """``div f + (f, ∇ ln ρ)`` = ``div(ρ f) / ρ`` as an unsimplified sympy expression."""
     x = system.state_symbols
-    log_rho = sp.log(density)
+    # ln ρ with products and powers split (ρ > 0): ln R^(-1/2) = -ln R/2 leaves no root to differentiate
+    log_rho = sp.expand_log(sp.log(density), force=True)
     return sum(sp.diff(f, xi) + f * sp.diff(log_rho, xi) for f, xi in zip(system.rhs, x))
 
 
-def _prove(system: MechanicalSystem, density: sp.Expr) -> tuple[bool, str]:
+def _prove(system: MechanicalSystem, density: sp.Expr) -> tuple[bool | None, str]:
     numerator = sp.expand(sp.numer(sp.together(divergence_bracket(system, density))))
     if numerator == 0:
         return True, "numerator of div(rho f)/rho over a common denominator expands to 0"
+    angles = tuple(sorted({x for f in numerator.atoms(sp.sin, sp.cos) for x in f.free_symbols
+                           if x in system.state_symbols}, key=str))
+    if angles:  # sin² + cos² = 1 is not seen by expand: decide it with t = tan(q/2)
+        from nonholonomic.reducing_multiplier import rational_trig_is_zero
+
+        verdict = rational_trig_is_zero(numerator, angles)
+        if verdict is True:
+            return True, "numerator of div(rho f)/rho vanishes identically after t = tan(q/2) for the angles"
+        if verdict is None:
+            return None, "div(rho f)/rho: not reduced to a rational function of tan(q/2) (square roots left)"
     return False, f"div(rho f)/rho has a non-zero numerator with {len(sp.Add.make_args(numerator))} terms"
 
 
@@ -83,6 +94,10 @@ def measure_evidence(system: MechanicalSystem, parameters: np.ndarray, states: n
     ``states`` (e.g. a trajectory's samples) are thinned to at most ``max_points``.
     """
     claim = system.measure
+    if claim.density is None:
+        return [CheckEvidence(name="invariant_measure", quantity="div(rho f)", formula=claim.formula,
+                              equation=claim.equation, method="symbolic", residual=None, tolerance=None, passed=None,
+                              detail="no invariant measure is claimed for this system: " + claim.formula)]
     proven, detail = symbolic_divergence_vanishes(system, budget_s=budget_s)
     idx = np.unique(np.linspace(0, len(states) - 1, min(len(states), max_points)).astype(int))
     residual = pointwise_divergence_residual(system, parameters, states[idx])

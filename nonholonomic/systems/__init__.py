@@ -2,6 +2,8 @@
 
 Adding a system is one new module exposing ``KIND``, ``TITLE``, ``PARAMETERS``, ``STATE``,
 ``POTENTIALS`` and ``define(potential) -> MechanicalSystem``, plus its entry here and its tests.
+A kind whose geometry the user writes (``ball_on_surface``: the surface Φ) also takes it:
+``define(potential, surface)``; :data:`SURFACE_KINDS` lists them.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from nonholonomic.expressions import ExpressionError
 from nonholonomic.potentials import Potential, expression, potential_symbols
 from nonholonomic.systems import (
     ball_on_quadric,
+    ball_on_surface,
     chaplygin_ball,
     chaplygin_ball_veselova,
     clebsch,
@@ -24,15 +27,20 @@ from nonholonomic.systems import (
 )
 
 SYSTEMS: dict[str, ModuleType] = {module.KIND: module for module in (
-    chaplygin_ball, veselova, chaplygin_ball_veselova, rubber_ball, ball_on_quadric, neumann, clebsch, veselova_e3)}
+    chaplygin_ball, veselova, chaplygin_ball_veselova, rubber_ball, ball_on_quadric, ball_on_surface, neumann, clebsch,
+    veselova_e3)}
+#: Kinds that take a user's surface Φ(x) = 0 besides the potential.
+SURFACE_KINDS = frozenset({ball_on_surface.KIND})
 
 #: Built-in potentials each kind accepts (besides a user's expression, :func:`user_potential`).
 SUPPORTED_POTENTIALS: dict[str, tuple[str, ...]] = {kind: tuple(m.POTENTIALS) for kind, m in SYSTEMS.items()}
 
 
-def get_system(kind: str, potential: str | Potential = "zero") -> MechanicalSystem:
+def get_system(kind: str, potential: str | Potential = "zero",
+               surface: ball_on_surface.Surface | None = None) -> MechanicalSystem:
     """The symbolic definition of ``kind`` with ``potential``: the name of a built-in one, or one
-    written by the user (:func:`user_potential`).
+    written by the user (:func:`user_potential`); for a kind of :data:`SURFACE_KINDS`, on ``surface``
+    (:func:`nonholonomic.systems.ball_on_surface.surface`; None: the kind's example surface).
 
     Raises
     ------
@@ -43,6 +51,10 @@ def get_system(kind: str, potential: str | Potential = "zero") -> MechanicalSyst
         raise KeyError(f"unknown system kind {kind!r}; known: {sorted(SYSTEMS)}")
     if not isinstance(potential, Potential) and potential not in SYSTEMS[kind].POTENTIALS:
         raise KeyError(f"system {kind!r} does not support potential {potential!r}")
+    if surface is not None:
+        if kind not in SURFACE_KINDS:
+            raise KeyError(f"system {kind!r} takes no surface")
+        return SYSTEMS[kind].define(potential, surface)
     return SYSTEMS[kind].define(potential)
 
 
@@ -64,10 +76,11 @@ def user_potential(kind: str, text: str, parameters: tuple[str, ...]) -> Potenti
 
 @lru_cache(maxsize=None)
 def own_names(kind: str) -> frozenset[str]:
-    """Names a user's potential parameter may not take: the system's parameters and their symbols,
-    its state and derived vectors and their components, the times."""
+    """Names a user's potential (or surface) parameter may not take: the system's parameters and their
+    symbols, its state and derived vectors and their components, the times."""
     system = SYSTEMS[kind].define("zero")
-    names = {p.name for p in system.parameters} | {str(s) for p in system.parameters for s in p.symbols}
+    own = SYSTEMS[kind].PARAMETERS
+    names = {p.name for p in own} | {str(s) for p in own for s in p.symbols}
     names |= {v.name for v in system.state} | {str(s) for v in system.state for s in v.symbols}
     names |= {d.name for d in system.derived} | {f"{d.name}{i}" for d in system.derived for i in (1, 2, 3)}
     return frozenset(names | {"t", "tau"})

@@ -204,7 +204,8 @@ def test_geometric_and_momentum_vectors_come_from_the_definitions():
         found[kind] = (geometric.name, momentum.name, constraint is not None)
     assert found == {"chaplygin_ball": ("gamma", "M", True), "veselova": ("gamma", "omega", True),
                      "chaplygin_ball_veselova": ("gamma", "omega", True), "rubber_ball": ("gamma", "omega", True),
-                     "ball_on_quadric": ("x", "omega", True), "neumann": ("s", "L", True),
+                     "ball_on_quadric": ("x", "omega", True), "ball_on_surface": ("x", "omega", True),
+                     "neumann": ("s", "L", True),
                      "clebsch": ("s", "L", True), "veselova_e3": ("Gamma", "M", True)}
 
 

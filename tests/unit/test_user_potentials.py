@@ -24,6 +24,7 @@ USER_U = {
     "chaplygin_ball_veselova": ("q*gamma3**2 + r*gamma1*E2", {"q": 0.4, "r": -0.3}),
     "rubber_ball": ("q*gamma3**2 + r*gamma1", {"q": 0.4, "r": -0.3}),
     "ball_on_quadric": ("q*x3**2 + r*x1", {"q": 0.4, "r": -0.3}),
+    "ball_on_surface": ("q*x3**2 + r*x1", {"q": 0.4, "r": -0.3}),
     "clebsch": ("q*s3**2 + r*s1*s2", {"q": 0.4, "r": -0.3}),
     "neumann": ("q*s1**3 + r*s2", {"q": 0.4, "r": -0.3}),
     "veselova_e3": ("q*Gamma3**2 + r*Gamma1", {"q": 0.4, "r": -0.3}),

@@ -1,0 +1,52 @@
+"""A generalized Chaplygin system of the user's own through the API: the job runs in t and tau with its
+Hamiltonian form, its page and plots render, bad fields are 422 problems naming them."""
+
+from __future__ import annotations
+
+import copy
+
+from nonholonomic.systems.generalized_chaplygin import EXAMPLE_JOB
+from tests.support import poll_job
+
+
+def test_the_example_job_runs_with_its_hamiltonian_form_page_and_plots(client):
+    catalog = client.get("/v1/systems").json()["generalized_chaplygin"]
+    assert catalog["example"] == EXAMPLE_JOB and catalog["state"] == ["q", "qdot"]
+    r = client.post("/v1/jobs", json=catalog["example"])
+    assert r.status_code == 202, r.text
+    view = poll_job(client, r.headers["location"])
+    assert view["status"] == "succeeded", view["error"]
+    result = view["result"]
+    assert result["tau_final"] > 0 and result["time"]["tau"].startswith("reduced time, d tau = N dt")
+    checks = {(c["name"], c["method"]): c for c in result["checks"]}
+    assert checks[("hamiltonian_flow", "symbolic")]["passed"] is True
+    assert checks[("hamiltonian_flow", "pointwise")]["residual"] < 1e-12
+    assert checks[("jacobi_identity", "symbolic")]["passed"] is True
+    assert checks[("invariant_measure", "symbolic")]["passed"] is True
+    assert result["integrals"][0]["name"] == "energy" and result["integrals"][0]["max_rel_drift"] < 1e-12
+    page = client.get(f"{r.headers['location']}/page")
+    assert page.status_code == 200 and "generalized_chaplygin" in page.text
+    for name in ("trajectory", "integrals"):
+        plot = client.get(f"{r.headers['location']}/plots/{name}.png")
+        assert plot.status_code == 200 and plot.headers["content-type"] == "image/png", plot.text
+
+
+def _errors(client, body) -> dict[str, str]:
+    r = client.post("/v1/jobs", json=body)
+    assert r.status_code == 422 and r.headers["content-type"] == "application/problem+json", r.text
+    return {e["field"]: e["reason"] for e in r.json()["errors"]}
+
+
+def test_bad_fields_are_422s_naming_them(client):
+    body = copy.deepcopy(EXAMPLE_JOB)
+    body["system"]["lagrangian"] = "thetadot**3"
+    assert "degree 3" in _errors(client, body)["system.lagrangian"]
+    body = copy.deepcopy(EXAMPLE_JOB)
+    body["system"]["a2"] = "I9*phi"
+    assert "unknown name 'I9'" in _errors(client, body)["system.a2"]
+    body = copy.deepcopy(EXAMPLE_JOB)
+    body["initial_state"] = {"q": [0.0, 0.4], "qdot": [0.1, 0.2]}  # theta = 0: det G = 0
+    assert "singular" in _errors(client, body)["initial_state.q"]
+    body = copy.deepcopy(EXAMPLE_JOB)
+    body["initial_state"] = {"q": [0.7, 0.4], "qdot": [0.1, 0.2, 0.3]}
+    assert "needs 2 components" in _errors(client, body)["initial_state.qdot"]
