@@ -70,7 +70,8 @@ class JobRequest(BaseModel):
     system: JobSystemSpec
     initial_state: dict[str, StateVec] = Field(
         description="state vectors by name (the catalog lists them), e.g. {'M': [..], 'gamma': [..]}; "
-                    "for the ball 'omega' may replace 'M'")
+                    "for the ball 'omega' may replace 'M'; for a generalized_chaplygin system 'q' and 'qdot', "
+                    "two components each")
     t_final: FiniteFloat = Field(gt=0, description="end of the integration interval [0, t_final], in s")
     samples: int = Field(201, ge=2, description="number of equally spaced sample times, both ends included")
     checks: list[Literal["integrals", "measure", "bracket", "euler_angles", "isomorphisms"]] = Field(

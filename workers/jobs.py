@@ -87,9 +87,11 @@ def warm_up() -> None:
     from nonholonomic.evidence.measure import symbolic_divergence_vanishes
     from nonholonomic.integration import MACHINE_EPSILON, heyoka_template
     from nonholonomic.kernels import numeric
-    from nonholonomic.systems import SUPPORTED_POTENTIALS, get_system
+    from nonholonomic.systems import SUPPORTED_POTENTIALS, SURFACE_KINDS, get_system
 
     for kind, potentials in SUPPORTED_POTENTIALS.items():
+        if kind in SURFACE_KINDS:  # a user's surface is compiled with its first job: the example's would be wasted
+            continue
         for potential in potentials:
             system = get_system(kind, potential)
             heyoka_template(system, MACHINE_EPSILON)

@@ -38,7 +38,6 @@ from nonholonomic.definition import (
     Parameter,
     Projection,
     StateConstraint,
-    StateVector,
     cross,
     dot,
     gradient,
@@ -48,26 +47,19 @@ from nonholonomic.potentials import (
     MAX_EXPRESSION_LENGTH,
     MAX_EXPRESSION_PARAMETERS,
     Potential,
-    ZERO,
-    catalog_of,
-    harmonic,
-    linear,
     potential_symbols,
     resolve,
     smooth_potential,
 )
-from nonholonomic.systems.ball_on_quadric import D, D0, R, angular_acceleration, m, omega, reduction_residual, x
+from nonholonomic.systems import ball_on_quadric as bq
+from nonholonomic.systems.ball_on_quadric import D, D0, R, angular_acceleration, omega, reduction_residual, x
 
 KIND = "ball_on_surface"
 TITLE = "A dynamically symmetric ball rolling on a surface Phi(x) = 0 of the user's own"
 
-PARAMETERS = (
-    Parameter("D0", (D0,), "central moment of inertia of the dynamically symmetric ball (I = D0·1)", "kg m^2",
-              minimum=0.0, strict=True),
-    Parameter("m", (m,), "mass of the ball", "kg", minimum=0.0, strict=True),
-    Parameter("R", (R,), "radius of the ball", "m", minimum=0.0, strict=True),
-)
-POTENTIALS = catalog_of(ZERO, linear("x", unit="kg m/s^2"), harmonic("x"))
+#: D0, m, R: the ball is that of the nonholonomic Jacobi problem; so are its potentials.
+PARAMETERS = bq.PARAMETERS[:3]
+POTENTIALS = bq.POTENTIALS
 #: The state vectors a potential of this kind may use (an expression potential uses their components).
 POTENTIAL_VARIABLES = ("x",)
 #: The names Φ may use besides its own parameters.
@@ -124,10 +116,7 @@ EXAMPLE = {
     "t_final": 100.0, "samples": 201,
 }
 
-STATE = (
-    StateVector("x", tuple(x), "position of the ball's centre, space-fixed frame", "m"),
-    StateVector("omega", tuple(omega), "angular velocity of the ball, space-fixed frame", "rad/s"),
-)
+STATE = bq.STATE
 
 
 def surface_gradient(Phi: sp.Expr) -> sp.Matrix:

@@ -155,7 +155,7 @@ def test_the_torus_measure_proof_and_the_field_are_those_of_the_quadric_form():
     mine = bs.equations_of_motion(Phi, sp.Integer(0))
     theirs = bq.equations_of_motion(sp.Integer(0))
     assert all(sp.simplify(a - b) == 0 for a, b in zip(mine[:3], theirs[:3]))
-    point = {s: v for s, v in zip([*bs.x, *bs.omega, *A.free_symbols, bs.D0, bs.m, bs.R],
+    point = {s: v for s, v in zip([*bs.x, *bs.omega, *A.free_symbols, bq.D0, bq.m, bq.R],
                                   [0.3, -0.2, 0.5, 1.0, 0.4, -0.7, *np.linspace(0.5, 1.5, len(A.free_symbols)),
                                    0.036, 1.0, 0.3])}
     assert all(abs(float((a - b).subs(point))) < 1e-12 for a, b in zip(mine, theirs))
