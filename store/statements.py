@@ -14,6 +14,16 @@ def autocommit(engine: Engine) -> Engine:
 
 
 def changed_one(engine: Engine, statement: Any) -> bool:
-    """Execute ``statement`` on ``engine`` (from :func:`autocommit`); True if it changed exactly one row."""
+    """Execute ``statement`` on ``engine`` (from :func:`autocommit`); True if it changed exactly one row.
+
+    A statement interrupted while it runs (a job's time limit is a signal that raises in the middle of
+    the driver's wait) leaves its connection busy: it is invalidated, not rolled back and pooled, so the
+    interruption itself propagates (not "another command is already in progress") and the next write
+    gets a fresh connection.
+    """
     with engine.connect() as connection:
-        return connection.execute(statement).rowcount == 1
+        try:
+            return connection.execute(statement).rowcount == 1
+        except BaseException:
+            connection.invalidate()
+            raise
