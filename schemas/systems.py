@@ -9,15 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import (
-    AfterValidator,
-    BaseModel,
-    ConfigDict,
-    Field,
-    ValidationInfo,
-    create_model,
-    field_validator,
-)
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
 from nonholonomic.expressions import ExpressionError, declare_symbols
