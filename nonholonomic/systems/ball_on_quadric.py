@@ -188,6 +188,17 @@ def reduction_residual() -> sp.Matrix:
     return (omega_dot - closed).subs(on_sphere).applyfunc(sp.cancel)
 
 
+def check_reduction() -> None:
+    """Raise AssertionError unless :func:`reduction_residual` is zero (the closed form used is sympy's)."""
+    if any(e != 0 for e in reduction_residual()):
+        raise AssertionError("eliminating N does not give (D0 + D) domega/dt = D (omega, n) dn/dt - R n x dU/dx")
+
+
+def kinetic_energy(n: sp.Matrix, coefficient: sp.Expr = D) -> sp.Expr:
+    """``½(D₀ + D) ω² − ½ c (ω, n)²`` with ``c = D`` (eq. 2804-2, ERRATA 12) for the normal ``n``."""
+    return (D0 + D) * dot(omega, omega) / 2 - coefficient * dot(omega, n) ** 2 / 2
+
+
 def equations_of_motion(U: sp.Expr, torque: sp.Expr = -R, C: sp.Matrix = A) -> tuple[sp.Expr, ...]:
     """``(dx/dt, dω/dt)`` of eq. (2804-1) with the potential's ``torque`` coefficient (see
     :func:`angular_acceleration`) and ``n = C x/|C x|`` (``C = A = B⁻¹`` for the quadric)."""
@@ -197,7 +208,7 @@ def equations_of_motion(U: sp.Expr, torque: sp.Expr = -R, C: sp.Matrix = A) -> t
 
 def energy(U: sp.Expr, coefficient: sp.Expr = D) -> sp.Expr:
     """``H = ½(D₀ + D) ω² − ½ c (ω, n)² + U`` with ``c = D`` (eq. 2804-2, ERRATA 12)."""
-    return (D0 + D) * dot(omega, omega) / 2 - coefficient * dot(omega, normal()) ** 2 / 2 + U
+    return kinetic_energy(normal(), coefficient) + U
 
 
 def joachimsthal(k: sp.Expr = sp.Integer(0)) -> sp.Expr:
@@ -224,8 +235,7 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
     AssertionError
         If sympy's elimination of the reaction does not reduce to the closed form used.
     """
-    if any(e != 0 for e in reduction_residual()):
-        raise AssertionError("eliminating N does not give (D0 + D) domega/dt = D (omega, n) dn/dt - R n x dU/dx")
+    check_reduction()
     pot = resolve(POTENTIALS, potential)
     variables = {"x": x}
     U = pot.build(variables)
@@ -233,7 +243,7 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
     B_inv_x = A * x
     x_B_inv_x = dot(x, B_inv_x)
     omega_sq = dot(omega, omega)
-    kinetic = (D0 + D) * omega_sq / 2 - D * dot(omega, n) ** 2 / 2
+    kinetic = kinetic_energy(n)
     # ω² tr(B⁻¹)/(n, B n), with (n, B n) = (n, adj(A) n)/det A.
     K_scale = omega_sq * A.trace() * A_det / dot(n, A_adj * n)
     integrals = [
