@@ -14,6 +14,11 @@ warm-up, two phases, each from ``--clients`` threads on one keep-alive connectio
 2. Paced: ``--jobs`` small jobs offered at ``--rate`` per second in all (open loop: each client keeps
    its own schedule); every submit is timed (p50, p99).
 
+Meanwhile a process of its own polls ``GET /health`` 10 times a second (one keep-alive connection;
+``--health-rate``); for each phase, its p50, p99 and max and the count of answers other than 200
+(targets, issue 19: p99 ≤ 100 ms, no 503 while the broker, the store and a warm worker are there).
+The issue's runs were ``--clients 16`` and ``--clients 32``.
+
 For each, the API process's CPU time (``/proc/<pid>/stat``, every thread) over the submissions,
 divided by the jobs, is its CPU per job (the worker's, its pool processes included, likewise), and
 the end is read off the job store (not by polling the API): jobs per second end to end is
@@ -25,7 +30,7 @@ The reference, measured in the same run: the same job run in this process throug
 :func:`workers.jobs.run_job` (what a worker process calls); ``2 / median`` is the rate two processes
 could reach with no queue, no database and no HTTP, and ``end-to-end / that`` the fraction of it the
 service delivers. Targets (issue 11): API CPU < 3 ms per job, ≥ 100 jobs/s, p99 submit < 50 ms,
-nothing lost (reported PASS or MISS; the exit status is 1 only if a job was lost or failed).
+(issue 19) /health p99 ≤ 100 ms and always 200, nothing lost (reported PASS or MISS; the exit status is 1 only if a job was lost or failed).
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ import os  # noqa: E402
 import random  # noqa: E402
 import secrets  # noqa: E402
 import statistics  # noqa: E402
+import subprocess  # noqa: E402
 import tempfile  # noqa: E402
 import threading  # noqa: E402
 import time  # noqa: E402
@@ -65,7 +71,29 @@ JOB: dict[str, Any] = {
 }
 WARMUP_JOBS = 100
 SAMPLE_CHECKED = 100
-TARGETS = {"api_cpu_ms": 3.0, "jobs_per_s": 100.0, "p99_submit_ms": 50.0}
+TARGETS = {"api_cpu_ms": 3.0, "jobs_per_s": 100.0, "p99_submit_ms": 50.0, "p99_health_ms": 100.0}
+#: Polls ``GET /health`` every ``1 / rate`` seconds on one keep-alive connection (in a process of its own:
+#: the load's client threads do not delay it); prints ``wall-clock start, status, seconds`` per answer.
+HEALTH_PROBE = """
+import http.client, sys, time
+port, period = int(sys.argv[1]), 1 / float(sys.argv[2])
+connection = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+next_at = time.perf_counter()
+while True:
+    wall, start = time.time(), time.perf_counter()
+    try:
+        connection.request("GET", "/health")
+        response = connection.getresponse()
+        response.read()
+        status = response.status
+    except (OSError, http.client.HTTPException):
+        connection.close()
+        connection = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+        status = 0
+    print(f"{wall:.6f} {status} {time.perf_counter() - start:.6f}", flush=True)
+    next_at += period
+    time.sleep(max(0.0, next_at - time.perf_counter()))
+"""
 TICKS = os.sysconf("SC_CLK_TCK")
 
 
@@ -189,6 +217,9 @@ class Phase:
     end_to_end_per_s: float
     api_cpu_ms: float
     worker_cpu_ms: float
+    started: float = 0.0
+    ended: float = 0.0
+    health: str = ""
 
     def line(self, name: str) -> str:
         p50, p99 = np.percentile(self.latencies_ms, [50, 99])
@@ -212,7 +243,42 @@ def run_phase(port: int, api_pid: int, worker_pid: int, store: Any, ended_before
     with store.session() as session:
         last = session.scalar(select(func.max(JobRow.finished)))
     return Phase(jobs, ids, np.asarray(latencies) * 1e3, jobs / submit_wall, jobs / (last - started), api_cpu_ms,
-                 worker_cpu_ms)
+                 worker_cpu_ms, started, time.time())
+
+
+class HealthProbe:
+    """``GET /health`` polled from a process of its own (:data:`HEALTH_PROBE`) for the whole run."""
+
+    def __init__(self, port: int, rate: float) -> None:
+        self.process = subprocess.Popen([sys.executable, "-c", HEALTH_PROBE, str(port), str(rate)],
+                                        stdout=subprocess.PIPE, text=True)
+        self.answers: list[tuple[float, int, float]] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            wall, status, seconds = line.split()
+            self.answers.append((float(wall), int(status), float(seconds)))
+
+    def stop(self) -> None:
+        self.process.terminate()
+        self.process.wait(10)
+        self._reader.join(10)
+
+    def summary(self, started: float, ended: float) -> tuple[str, float, int]:
+        """One line on the answers between ``started`` and ``ended`` (wall clock), their p99 (ms) and the
+        count of answers other than 200."""
+        window = [(status, seconds) for wall, status, seconds in list(self.answers) if started <= wall <= ended]
+        if not window:
+            return "no /health answer in this phase", float("nan"), 0
+        ms = np.asarray([seconds for _, seconds in window]) * 1e3
+        p50, p99 = np.percentile(ms, [50, 99])
+        bad = [status for status, _ in window if status != 200]
+        return (f"/health ×{len(window)}: p50 {p50:5.1f} ms  p99 {p99:5.1f} ms  max {ms.max():5.1f} ms  "
+                f"not 200: {len(bad)}" + (f" ({', '.join(map(str, sorted(set(bad))))})" if bad else ""),
+                float(p99), len(bad))
 
 
 def main() -> int:
@@ -221,6 +287,7 @@ def main() -> int:
     parser.add_argument("--rate", type=float, default=120.0, help="jobs per second offered in the paced phase")
     parser.add_argument("--burst", type=int, default=2000, help="jobs of the saturation phase (as fast as answered)")
     parser.add_argument("--clients", type=int, default=8)
+    parser.add_argument("--health-rate", type=float, default=10.0, help="GET /health per second during the phases")
     args = parser.parse_args()
 
     from store.jobs import JobStore
@@ -238,17 +305,19 @@ def main() -> int:
     worker = start_worker(REDIS_URL, queue, logs / "worker.log", concurrency=2,
                           extra_env={k: v for k, v in env.items() if k != "REDIS_URL"})
     api = start_api(port, logs / "api.log", env)
-    store = None
+    store = probe = None
     try:
         wait_healthy(f"http://127.0.0.1:{port}", timeout=300)
         store = JobStore(database, 3600)
         submit_all(port, WARMUP_JOBS, args.clients)
         wait_ended(store, 0, WARMUP_JOBS, 300)
+        probe = HealthProbe(port, args.health_rate)
         ended = WARMUP_JOBS
         burst = run_phase(port, api.pid, worker.pid, store, ended, args.burst, args.clients, None)
         ended += args.burst
         paced = run_phase(port, api.pid, worker.pid, store, ended, args.jobs, args.clients, args.rate)
         ids = burst.ids + paced.ids
+        probe.stop()
 
         statuses = listed_statuses(port)
         succeeded = sum(statuses.get(i) == "succeeded" for i in ids)
@@ -274,6 +343,10 @@ def main() -> int:
         print(burst.line(f"saturation ({burst.jobs})"))
         print(paced.line(f"paced ({paced.jobs})"))
         print(f"  API CPU per result read {get_cpu_ms:.2f} ms")
+        for name, phase in (("saturation", burst), ("paced", paced)):  # submissions until every job ended
+            line, health_p99, not_ok = probe.summary(phase.started, phase.ended)
+            print(f"  {name:<11s}{line}   target p99 ≤ {TARGETS['p99_health_ms']:g} ms, all 200   "
+                  f"{verdict(health_p99 <= TARGETS['p99_health_ms'] and not_ok == 0)}")
         for name, phase in (("saturation", burst), ("paced", paced)):  # busy: warm caches; paced: each alone
             print(f"API CPU per job ({name + ')':<11s}{phase.api_cpu_ms:5.2f} ms   target < {TARGETS['api_cpu_ms']:g} ms   "
                   f"ratio {phase.api_cpu_ms / TARGETS['api_cpu_ms']:.2f}   {verdict(phase.api_cpu_ms < TARGETS['api_cpu_ms'])}")
@@ -293,6 +366,8 @@ def main() -> int:
         print((logs / "worker.log").read_text()[-3000:], (logs / "api.log").read_text()[-3000:])
         raise
     finally:
+        if probe is not None and probe.process.poll() is None:
+            probe.stop()
         stop(api)
         stop(worker)
         if store is not None:

@@ -128,7 +128,26 @@ def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, ob
     if project:
         with np.errstate(all="ignore"):
             y, _ = project_initial_state(system, p, y)
-    return constraint_problems(system, p, y) + potential_problems(system, p, y)
+    return constraint_problems(system, p, y) + surface_problems(system, p, y) + potential_problems(system, p, y)
+
+
+#: Kinds whose state moves on a surface Φ(x) = 0 of the user's, with normal ∇Φ/|∇Φ| and density |∇Φ|.
+_SURFACE_KINDS = frozenset({"ball_on_surface"})
+
+
+def surface_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
+    """A user's surface whose gradient vanishes (or is not finite) at the initial x: the normal
+    ∇Φ/|∇Φ| of the equations is undefined there and every step would be nan; refused naming
+    ``initial_state.x`` (the density |∇Φ| of the measure is the kernel that says so)."""
+    if system.kind not in _SURFACE_KINDS:
+        return []
+    with np.errstate(all="ignore"):
+        norm = float(numeric(system).density(np.asarray(y, dtype=float)[None, :], p)[0, 0])  # |grad Phi|
+    if norm > 0 and np.isfinite(norm):
+        return []
+    why = (f"grad Phi vanishes here (|grad Phi| = {norm:g}): the normal grad Phi/|grad Phi| is undefined"
+           if norm == 0 else f"grad Phi is not finite here (|grad Phi| = {norm:g}): Phi is singular")
+    return [FieldProblem("initial_state.x", f"{why}; choose an x on a regular part of the surface, or another Phi")]
 
 
 def potential_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:

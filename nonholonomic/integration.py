@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import copy
 import threading
+from collections import OrderedDict
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -166,17 +167,27 @@ def heyoka_batch_template(system: MechanicalSystem, tolerance: float, batch_size
 
 
 _per_thread = threading.local()
+#: Copies one thread keeps of each kind, least recently used dropped first: as many as the templates'
+#: caches, so that a worker running many distinct user systems does not keep every one's compiled code
+#: (unbounded, a pool process grew ~3 MiB per new potential: bench/bench_user_potentials.py).
+THREAD_COPIES = 32
 
 
 def _thread_copy(kind: str, system: MechanicalSystem, *key: object) -> hy.taylor_adaptive | hy.taylor_adaptive_batch:
     """This thread's own copy of a compiled integrator (copied once per thread, then reused; every
-    run resets its time, state and parameters). Looked up by the system's identity: hashing a
-    system hashes its whole symbolic definition, which would cost more than a short run."""
-    cache: dict[tuple[object, ...], tuple[MechanicalSystem, object]] = _per_thread.__dict__.setdefault(kind, {})
-    hit = cache.get((id(system), *key))
+    run resets its time, state and parameters; the last :data:`THREAD_COPIES` kept). Looked up by the
+    system's identity: hashing a system hashes its whole symbolic definition, which would cost more
+    than a short run."""
+    cache: OrderedDict[tuple[object, ...], tuple[MechanicalSystem, object]] = _per_thread.__dict__.setdefault(
+        kind, OrderedDict())
+    lookup = (id(system), *key)
+    hit = cache.get(lookup)
     if hit is None or hit[0] is not system:
         template = heyoka_template(system, *key) if kind == "scalar" else heyoka_batch_template(system, *key)
-        hit = cache[(id(system), *key)] = (system, copy.deepcopy(template))
+        hit = cache[lookup] = (system, copy.deepcopy(template))
+        while len(cache) > THREAD_COPIES:
+            cache.popitem(last=False)
+    cache.move_to_end(lookup)
     return hit[1]  # type: ignore[return-value]
 
 
@@ -437,7 +448,8 @@ class _BatchRun:
                 break
             for i in {source[lane] for lane in bad}:
                 try:
-                    alone[i] = _integrate_heyoka(self.ts.system, P[i], Y0[i], self.grid, self.tol, None)
+                    # with progress: a cancellation or time limit acts here too
+                    alone[i] = _integrate_heyoka(self.ts.system, P[i], Y0[i], self.grid, self.tol, progress)
                 except IntegrationError as exc:
                     alone[i] = exc
             healthy = [i for i in range(len(P)) if i not in alone]

@@ -15,7 +15,7 @@ from functools import lru_cache
 import sympy as sp
 
 from nonholonomic.definition import Parameter, dot, symmetric_matrix_symbols, upper_triangle, vector_symbols
-from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
+from nonholonomic.expressions import ExpressionError, declare_symbols, differentiable, integrable, parse_expression
 
 Variables = Mapping[str, sp.Matrix]
 """State vectors by name, plus ``"I"``: the inertia tensor, where the system has one."""
@@ -154,14 +154,9 @@ def expression(text: str, parameters: tuple[str, ...], variables: tuple[str, ...
     )
 
 
-#: Functions whose derivative the equations cannot use (a potential's gradient drives the motion),
-#: with a smooth stand-in.
-_NOT_SMOOTH = {sp.Abs: ("abs", "for |x| write sqrt(x**2 + eps**2)"),
-               sp.sign: ("sign", "for sign(x) write x/sqrt(x**2 + eps**2)")}
-
-
-def smooth_potential(U: sp.Expr) -> sp.Expr:
-    """``U`` as the integrator takes it: ``cot``, ``sec``, ``csc`` written with ``sin`` and ``cos``.
+def smooth_potential(U: sp.Expr, why: str = "the equations need U's gradient") -> sp.Expr:
+    """``U`` as the integrator takes it: twice differentiable (no ``abs``, ``sign``), rational exponents,
+    ``cot``, ``sec``, ``csc`` written with ``sin`` and ``cos`` (:mod:`nonholonomic.expressions.smoothness`).
 
     Raises
     ------
@@ -169,14 +164,7 @@ def smooth_potential(U: sp.Expr) -> sp.Expr:
         For ``abs`` or ``sign`` (not differentiable: the field needs ∂U), and for a power whose
         exponent is not a rational number (``x**pi``, ``x**q``).
     """
-    for func, (name, instead) in _NOT_SMOOTH.items():
-        if U.has(func):
-            raise ExpressionError(f"{name}() is not smooth: the equations need U's gradient ({instead})")
-    for power in U.atoms(sp.Pow):
-        if not power.exp.is_Rational:
-            raise ExpressionError(f"the exponent of {power} must be a rational number (write exp(y*log(x)) for x**y)")
-    return U.replace(sp.cot, lambda x: sp.cos(x) / sp.sin(x)).replace(
-        sp.sec, lambda x: 1 / sp.cos(x)).replace(sp.csc, lambda x: 1 / sp.sin(x))
+    return integrable(differentiable(U, why))
 
 
 def resolve(potentials: Mapping[str, Potential], potential: str | Potential) -> Potential:

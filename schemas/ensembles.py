@@ -22,7 +22,7 @@ from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems, t_final_within_limit
 from schemas.results import MemberResultModel
 from schemas.settings import get_settings
-from schemas.systems import AnySystemSpec, FiniteFloat, Vec3
+from schemas.systems import AnySystemSpec, FiniteFloat, Step, Vec3, no_step
 
 ENSEMBLE_JOB = "ensemble"
 _PATH = re.compile(r"^(?:potential\.)?([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
@@ -111,12 +111,19 @@ class EnsembleRequest(BaseModel):
         """``(start, stop)`` of every chunk."""
         return [(c.start, c.stop) for c in plan(self.members.count, self.effective_chunk_size())]
 
-    def problems(self) -> list[FieldProblem]:
-        """Everything wrong with the request, each member's state included, before anything is queued."""
+    def expressions(self) -> list[tuple[str, str]]:
+        """Every expression the user wrote, by field path: the system's and the surface."""
+        found = self.system.expressions()  # type: ignore[attr-defined]
+        return found + ([("poincare.surface", self.poincare.surface)] if self.poincare is not None else [])
+
+    def problems(self, step: Step = no_step) -> list[FieldProblem]:
+        """Everything wrong with the request, each member's state included, before anything is queued
+        (``step(fields)`` is told which fields each stage reads, as for a job)."""
         settings = get_settings()
-        system = self.definition()
+        system, found = self.system.checked_definition(step)  # type: ignore[attr-defined]
+        if system is None:
+            return found
         count = self.members.count
-        found: list[FieldProblem] = []
         if count > settings.max_ensemble_members:
             found.append(FieldProblem("members", f"{count} members exceed this service's maximum "
                                                   f"{settings.max_ensemble_members}"))
@@ -128,10 +135,30 @@ class EnsembleRequest(BaseModel):
             found.append(FieldProblem("poincare.max_points", f"members x max_points = {count} x "
                                                              f"{self.poincare.max_points} exceeds this service's "
                                                              f"maximum {settings.max_ensemble_section_points}"))
-        found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov)
+        found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov, step)
         if found:
             return found
+        found += self._chunk_problems(system, count, settings.max_queued_messages)
+        if found:
+            return found
+        step([field for field, _ in self.system.expressions()] or ["members"])  # type: ignore[attr-defined]
         return self._member_problems(system)
+
+    def _chunk_problems(self, system: MechanicalSystem, count: int, max_queued: int) -> list[FieldProblem]:
+        """An ensemble whose chunks alone exceed the queue's bound could never be admitted: refused here,
+        before its members are validated or anything is sent (issue 19, item 5)."""
+        if count < 1:
+            return []
+        size = self.chunk_size or default_chunk_size(
+            system, self.t_final, poincare=self.poincare.options() if self.poincare else None,
+            lyapunov=self.lyapunov.options() if self.lyapunov else None)
+        chunks = -(-count // size)
+        if chunks <= max_queued:
+            return []
+        field = "chunk_size" if self.chunk_size else "members"
+        return [FieldProblem(field, f"{count} members in chunks of {size} make {chunks} chunks, more than the "
+                                    f"queue holds (max_queued_messages={max_queued}); send at most "
+                                    f"{max_queued * size} members, or larger chunks")]
 
     def _member_problems(self, system: MechanicalSystem) -> list[FieldProblem]:
         parameters = self.system.parameter_values()  # type: ignore[attr-defined]

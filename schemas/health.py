@@ -51,5 +51,7 @@ class Health(BaseModel):
     queue: str | None = Field(None, description="queue mode: the Celery queue the jobs go to")
     workers: EmbeddedWorkers | dict[str, QueueWorker] = Field(
         description="embedded mode: threads and warm-up; queue mode: each live worker, its queues and warm processes")
+    age_s: float = Field(0.0, ge=0, description="seconds since the check reported here began: 0 for a check made for "
+                         "this request; under load, the latest check of the API's monitor (every 0.5 s)")
     symbolic: SymbolicPoolStatus
     detail: str | None = Field(None, description="why jobs cannot start now (with 'degraded')")

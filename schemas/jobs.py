@@ -8,7 +8,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from nonholonomic.evidence.claims import MAX_CLAIMS, parse_claim
 from nonholonomic.expressions import ExpressionError
-from nonholonomic.integration import SCIPY_MIN_TOLERANCE
+from nonholonomic.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH
 from nonholonomic.initial_state import FieldProblem, initial_state_problems
 from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
@@ -17,7 +17,7 @@ from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.report import PaperReport
 from schemas.settings import get_settings
 from schemas.results import SimulationResultModel
-from schemas.systems import FiniteFloat, JobSystemSpec, StateVec
+from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 TERMINAL_STATUSES: frozenset[str] = frozenset({"succeeded", "failed", "cancelled"})
@@ -31,6 +31,10 @@ def t_final_within_limit(cls: type, v: float) -> float:
     return v
 
 
+#: Loosest accepted integrator tolerance (beyond, the evidence's drifts say nothing).
+MAX_TOLERANCE = 1e-3
+
+
 class IntegratorOptions(BaseModel):
     """Which engine integrates, at which tolerance."""
 
@@ -39,9 +43,10 @@ class IntegratorOptions(BaseModel):
     engine: Literal["heyoka", "scipy"] = Field(
         "heyoka", description="heyoka: adaptive Taylor method (default); scipy: DOP853, an independent cross-check")
     tolerance: FiniteFloat | None = Field(
-        None, gt=0, le=1e-3,
-        description="heyoka: relative/absolute tolerance (default machine epsilon 2.2e-16); "
-                    f"scipy: rtol = atol (default 1e-12, at least {SCIPY_MIN_TOLERANCE:g})")
+        None, ge=MACHINE_EPSILON, le=MAX_TOLERANCE,
+        description=f"heyoka: relative/absolute tolerance in [machine epsilon {MACHINE_EPSILON:.7g}, "
+                    f"{MAX_TOLERANCE:g}] (default machine epsilon: below it the engine cannot reach the tolerance and the job would not "
+                    f"end); scipy: rtol = atol (default 1e-12, at least {SCIPY_MIN_TOLERANCE:g})")
 
 
 class ClaimRequest(BaseModel):
@@ -101,16 +106,28 @@ class JobRequest(BaseModel):
             raise ValueError(f"samples = {v} exceeds this service's maximum {limit}")
         return v
 
-    def problems(self) -> list[FieldProblem]:
-        """Violations only the physics can see: state names, |γ| = 1, the engine's tolerance range."""
-        system = self.system.validation_definition()  # type: ignore[attr-defined]
+    def expressions(self) -> list[tuple[str, str]]:
+        """Every expression the user wrote, by field path: the system's, the surface, the claims."""
+        found = self.system.expressions()  # type: ignore[attr-defined]
+        if self.poincare is not None:
+            found.append(("poincare.surface", self.poincare.surface))
+        return found + [(f"claims[{i}].expression", claim.expression) for i, claim in enumerate(self.claims)]
+
+    def problems(self, step: Step = no_step) -> list[FieldProblem]:
+        """Violations only the physics can see: the expressions read by sympy, state names, |γ| = 1, the
+        engine's tolerance range. ``step(fields)`` is told which fields each stage reads (a validation
+        budget names them when it runs out)."""
+        system, found = self.system.checked_definition(step)  # type: ignore[attr-defined]
+        if system is None:
+            return found
         found = [FieldProblem(f"checks[{i}]", f"{check!r} is not available for {system.kind}; "
                                               f"available: {', '.join(available_checks(system))}")
                  for i, check in enumerate(self.checks) if check not in available_checks(system)]
         found += initial_state_problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
                                         self.initial_state, self.project_initial_state)
-        found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov)
+        found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov, step)
         for i, claim in enumerate(self.claims):
+            step([f"claims[{i}].expression"])
             try:
                 parse_claim(system, claim.expression)
             except ExpressionError as exc:
@@ -119,8 +136,10 @@ class JobRequest(BaseModel):
 
 
 def analysis_problems(system: MechanicalSystem, integrator: IntegratorOptions, t_final: float,
-                      poincare: PoincareRequest | None, lyapunov: LyapunovRequest | None) -> list[FieldProblem]:
-    """The integrator's tolerance range and the analysis blocks, checked against the system."""
+                      poincare: PoincareRequest | None, lyapunov: LyapunovRequest | None,
+                      step: Step = no_step) -> list[FieldProblem]:
+    """The integrator's tolerance range and the analysis blocks, checked against the system (``step`` is
+    told when the surface is read)."""
     found = []
     tol = integrator.tolerance
     if integrator.engine == "scipy" and tol is not None and tol < SCIPY_MIN_TOLERANCE:
@@ -130,6 +149,7 @@ def analysis_problems(system: MechanicalSystem, integrator: IntegratorOptions, t
         found.append(FieldProblem("integrator.engine", "poincare and lyapunov need heyoka (events and variational "
                                                        "equations)"))
     if poincare is not None:
+        step(["poincare.surface"])
         found += poincare.problems(system)
     if lyapunov is not None:
         found += lyapunov.problems(system, t_final)

@@ -57,6 +57,19 @@ class Settings(BaseSettings):
                                      description="jobs and ensemble chunks waiting in the queue; beyond: 429")
     cors_origins: str = Field("", description="comma-separated origins allowed by CORS ('' : none, '*': any)")
     warm_up: bool = Field(True, description="compile the integrators when a worker (or embedded API) starts")
+    idempotency_lease_s: float = Field(30.0, gt=0, description="seconds an Idempotency-Key stays 'in progress' "
+                                       "unless the API serving it renews it (an API that died frees it then)")
+    auth_failures_per_minute: int = Field(20, ge=0, description="requests with an unknown API key one client "
+                                          "address may send a minute; beyond: 429 (0: no limit)")
+    validation_budget_s: float = Field(5.0, gt=0, description="seconds a request's expressions may take to be read "
+                                       "and checked (in a child process of the symbolic pool); beyond: 422")
+    request_threads: int = Field(8, ge=1, description="threads running the API's blocking request work at once, "
+                                 "besides the symbolic pool's; more requests wait on the event loop (few threads keep "
+                                 "the event loop, and /health, answering under load)")
+    worker_max_memory_mib: int = Field(1024, ge=0, description="a worker's pool process whose resident memory passes "
+                                       "this after a job is replaced by a new one (compiled code of many distinct "
+                                       "user expressions is not all given back); 0: never")
+    worker_max_jobs: int = Field(0, ge=0, description="jobs after which a worker's pool process is replaced (0: never)")
 
     @property
     def embedded(self) -> bool:

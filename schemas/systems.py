@@ -7,12 +7,14 @@ from those declarations so the API cannot disagree with the core.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import Annotated, Any, Literal, Union
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
-from nonholonomic.expressions import ExpressionError, declare_symbols
+from nonholonomic.expressions import ExpressionError, check_expression, declare_symbols
+from nonholonomic.initial_state import FieldProblem
 from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, Potential
 from nonholonomic.systems import POTENTIAL_NAMES, SURFACE_KINDS, SYSTEMS, get_system, own_names, user_potential
 from nonholonomic.systems import generalized_chaplygin as gc
@@ -20,6 +22,14 @@ from nonholonomic.systems.ball_on_surface import SURFACE_VARIABLES, Surface, sur
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE as GENERALIZED_CHAPLYGIN_EXAMPLE
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+#: ``step(fields)``: the validation is about to read these fields (a budget overrun names them).
+Step = Callable[[Sequence[str]], None]
+
+
+def no_step(fields: Sequence[str]) -> None:
+    """The :data:`Step` of a validation that runs without a budget."""
+
+
 #: Admissible state components (initial states, vectors): beyond, the equations' products overflow.
 MAX_STATE_MAGNITUDE = 1e12
 StateFloat = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_STATE_MAGNITUDE, le=MAX_STATE_MAGNITUDE)]
@@ -99,23 +109,29 @@ class ExpressionPotentialSpec(PotentialSpec):
         return user_potential(kind, self.U, tuple(sorted(self.parameters)))
 
 
+def _taken(names: list[str], kind: str) -> str:
+    return (f"{', '.join(names)}: already a name of {kind} (its parameters, state or potential variables); choose "
+            "another")
+
+
 def _expression_model(kind: str) -> type[PotentialSpec]:
     def names(cls: type, values: dict[str, float]) -> dict[str, float]:
+        """Cheap checks; the system's own names (a definition to build) are checked off the event loop."""
         try:
             declare_symbols(list(values))
         except ExpressionError as exc:
             raise ValueError(str(exc)) from None
-        taken = sorted(set(values) & (own_names(kind) | set(POTENTIAL_NAMES[kind])))
+        taken = sorted(set(values) & set(POTENTIAL_NAMES[kind]))
         if taken:
-            raise ValueError(f"{', '.join(taken)}: already a name of {kind} (its parameters, state or potential "
-                             "variables); choose another")
+            raise ValueError(_taken(taken, kind))
         return values
 
     def parsed(cls: type, text: str, info: ValidationInfo) -> str:
+        """The cheap checks only (syntax, whitelist, names); sympy reads U within the validation budget."""
         if "parameters" not in info.data:
             return text  # the parameters are refused already
         try:
-            user_potential(kind, text, tuple(sorted(info.data["parameters"])))
+            check_expression(text, [*POTENTIAL_NAMES[kind], *info.data["parameters"]], max_length=MAX_EXPRESSION_LENGTH)
         except ExpressionError as exc:
             raise ValueError(str(exc)) from None
         return text
@@ -166,23 +182,24 @@ class SurfaceSpec(BaseModel):
     @field_validator("parameters")
     @classmethod
     def _names(cls, values: dict[str, float]) -> dict[str, float]:
+        """Cheap checks; the system's own names (a definition to build) are checked off the event loop."""
         try:
             declare_symbols(list(values))
         except ExpressionError as exc:
             raise ValueError(str(exc)) from None
-        taken = sorted(set(values) & (own_names("ball_on_surface") | set(SURFACE_VARIABLES)))
+        taken = sorted(set(values) & set(SURFACE_VARIABLES))
         if taken:
-            raise ValueError(f"{', '.join(taken)}: already a name of ball_on_surface (its parameters or state); "
-                             "choose another")
+            raise ValueError(_taken(taken, "ball_on_surface"))
         return values
 
     @field_validator("Phi")
     @classmethod
     def _parsed(cls, text: str, info: ValidationInfo) -> str:
+        """The cheap checks only (syntax, whitelist, names); sympy reads Phi within the validation budget."""
         if "parameters" not in info.data:
             return text  # the parameters are refused already
         try:
-            surface(text, tuple(sorted(info.data["parameters"])))
+            check_expression(text, [*SURFACE_VARIABLES, *info.data["parameters"]], max_length=MAX_EXPRESSION_LENGTH)
         except ExpressionError as exc:
             raise ValueError(str(exc)) from None
         return text
@@ -216,6 +233,40 @@ class SystemSpec(BaseModel):
         """The definition a request is checked against (the same as :meth:`definition` but for kinds whose
         definition runs heavy symbolic work)."""
         return self.definition()
+
+    def expressions(self) -> list[tuple[str, str]]:
+        """The expressions the user wrote in this block, by field path (``system.potential.U`` ...)."""
+        found = []
+        if isinstance(self.potential, ExpressionPotentialSpec):  # type: ignore[attr-defined]
+            found.append(("system.potential.U", self.potential.U))  # type: ignore[attr-defined]
+        if getattr(self, "surface", None) is not None:
+            found.append(("system.surface.Phi", self.surface.Phi))  # type: ignore[attr-defined]
+        return found
+
+    def checked_definition(self, step: Step = no_step) -> tuple[MechanicalSystem | None, list[FieldProblem]]:
+        """:meth:`validation_definition`, or the problems that keep it from being built, each naming its
+        field; ``step`` is told which fields each stage reads."""
+        fields = [field for field, _ in self.expressions()]
+        step(fields or ["system"])
+        kind: str = self.kind  # type: ignore[attr-defined]
+        own = own_names(kind) if fields else frozenset()
+        potential, on = self.potential, getattr(self, "surface", None)  # type: ignore[attr-defined]
+        declared = {"system.potential": potential.parameter_values() if "system.potential.U" in fields else {},
+                    "system.surface": on.parameters if "system.surface.Phi" in fields and on is not None else {}}
+        for block, names in declared.items():
+            taken = sorted(set(names) & own)
+            if taken:
+                return None, [FieldProblem(f"{block}.parameters", _taken(taken, kind))]
+        for field, read in (("system.potential.U", lambda: potential.core(kind)),
+                            ("system.surface.Phi", lambda: on.core())):  # type: ignore[union-attr]
+            if field in fields:
+                step([field])
+                try:
+                    read()
+                except ExpressionError as exc:
+                    return None, [FieldProblem(field, str(exc))]
+        step(fields or ["system"])
+        return self.validation_definition(), []
 
 
 def _names_apart(cls: type, potential: PotentialSpec, info: ValidationInfo) -> PotentialSpec:
@@ -315,14 +366,14 @@ class GeneralizedChaplyginSpec(SystemSpec):
     @field_validator("lagrangian", "a1", "a2", "b", "potential")
     @classmethod
     def _parsed(cls, text: str | None, info: ValidationInfo) -> str | None:
+        """The cheap checks only (syntax, whitelist, names); sympy reads the field within the validation budget."""
         if text is None or any(k not in info.data for k in ("coordinates", "velocities", "parameters")):
             return text  # the names are refused already
         try:
-            symbols = gc.declared(tuple(info.data["coordinates"]), tuple(info.data["velocities"]),
-                                  tuple(info.data["parameters"]))
-            gc.parse_field(info.field_name, text, symbols, tuple(info.data["velocities"]))
-        except gc.DataError as exc:
-            raise ValueError(exc.reason) from None
+            check_expression(text, [*info.data["coordinates"], *info.data["velocities"], *info.data["parameters"]],
+                             max_length=MAX_EXPRESSION_LENGTH)
+        except ExpressionError as exc:
+            raise ValueError(str(exc)) from None
         return text
 
     def parameter_values(self) -> dict[str, Any]:
@@ -340,6 +391,18 @@ class GeneralizedChaplyginSpec(SystemSpec):
     def validation_definition(self) -> MechanicalSystem:
         """The system without Theorem 1 (enough to check a request: names, state, the field at it)."""
         return gc.define(self.data(), reduce=False)
+
+    def expressions(self) -> list[tuple[str, str]]:
+        return [(f"system.{field}", getattr(self, field)) for field in gc.EXPRESSION_FIELDS
+                if getattr(self, field) is not None]
+
+    def checked_definition(self, step: Step = no_step) -> tuple[MechanicalSystem | None, list[FieldProblem]]:
+        step([field for field, _ in self.expressions()])
+        try:
+            self.data()
+        except gc.DataError as exc:
+            return None, [FieldProblem(f"system.{exc.field}", exc.reason)]
+        return self.validation_definition(), []
 
 
 #: What POST /v1/jobs takes as ``system``: every kind of the catalog and a generalized Chaplygin system.

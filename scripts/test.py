@@ -2,7 +2,8 @@
 """Quick start, command 2: install into .venv (with the test extra), make sure Redis answers on
 127.0.0.1:6379 (starting ``redis-server``, installing Debian's package if it is missing), that
 PostgreSQL answers on 127.0.0.1:5432 (starting a cluster of the tests' own if not) and that a
-headless Chromium is there for the page tests (installing Debian's ``chromium`` if it is missing),
+headless Chromium is there for the page tests (installing Debian's ``chromium`` if it is missing)
+and nginx for the slow-client tests (Debian's ``nginx-light``),
 then run the whole test suite. Extra arguments go to pytest (e.g. ``-k measure``).
 Screenshots and other artefacts of the run go to ``test-output/``."""
 
@@ -103,11 +104,21 @@ def ensure_chromium() -> str:
                      "NONHOLONOMIC_CHROMIUM to a Chromium binary) and retry")
 
 
+def ensure_nginx() -> dict[str, str]:
+    """The deployment's front door (deploy/nginx.conf), for the slow-client tests: Debian's
+    ``nginx-light`` installed if missing; required when it could be installed."""
+    if shutil.which("nginx") or os.path.exists("/usr/sbin/nginx") or apt_install("nginx-light"):
+        return {"NONHOLONOMIC_REQUIRE_NGINX": "1"}
+    say("no nginx (not root, or apt-get failed): the slow-client tests are skipped")
+    return {}
+
+
 def main(argv: list[str]) -> int:
     ensure_installed("test")
     ensure_redis()
     ensure_postgres()
-    env = {**os.environ, "NONHOLONOMIC_CHROMIUM": ensure_chromium(), "NONHOLONOMIC_REQUIRE_BROWSER": "1",
+    env = {**os.environ, **ensure_nginx(), "NONHOLONOMIC_CHROMIUM": ensure_chromium(),
+           "NONHOLONOMIC_REQUIRE_BROWSER": "1",
            "NONHOLONOMIC_TEST_OUTPUT": os.environ.get("NONHOLONOMIC_TEST_OUTPUT", str(ROOT / "test-output"))}
     os.chdir(ROOT)
     return subprocess.run([str(PYTHON), "-m", "pytest", *argv], env=env).returncode

@@ -6,6 +6,12 @@ entries ``name:key`` or ``key``). With keys, every ``/v1`` route needs one, sent
 or ``key-`` and 12 hex digits of its SHA-256) is recorded with each job and ensemble it submits,
 and another key gets a 404 for it, as for an id that does not exist. Jobs sent straight to the
 broker (no owner) are visible to every key. ``/health``, ``/docs`` and ``/openapi.json`` need no key.
+
+Guessing keys is rate limited: a client address that sent ``auth_failures_per_minute`` unknown keys
+gets a 429 with ``Retry-After`` for every request with a key, right or wrong, until its bucket refills
+(so a guess answers nothing while it is limited). Behind a reverse proxy the address is the proxy's
+unless uvicorn runs with ``--proxy-headers`` and the proxy is trusted (``--forwarded-allow-ips``).
+An unknown job id and another key's answer the same 404 after the same lookups (:func:`job_of`).
 """
 
 from __future__ import annotations
@@ -80,12 +86,52 @@ class RateLimiter:
             return (1.0 - bucket.tokens) / rate
 
 
+#: Client addresses whose failure buckets are kept; beyond, the full (refilled) ones are dropped.
+MAX_TRACKED_ADDRESSES = 10_000
+
+
+@dataclass
+class FailureLimiter:
+    """A token bucket per client address, taken by each unknown key: ``per_minute`` failures a minute,
+    bursts up to ``per_minute`` (per API process)."""
+
+    per_minute: int
+    _buckets: dict[str, _Bucket] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def _refilled(self, address: str, now: float) -> _Bucket:
+        bucket = self._buckets.setdefault(address, _Bucket(float(self.per_minute), now))
+        bucket.tokens = min(float(self.per_minute), bucket.tokens + (now - bucket.updated) * self.per_minute / 60.0)
+        bucket.updated = now
+        return bucket
+
+    def wait_s(self, address: str) -> float:
+        """0 if ``address`` may try a key now, else seconds until it may (a failure's token is back)."""
+        now = time.monotonic()
+        with self._lock:
+            if address not in self._buckets:
+                return 0.0
+            bucket = self._refilled(address, now)
+            return 0.0 if bucket.tokens >= 1.0 else (1.0 - bucket.tokens) * 60.0 / self.per_minute
+
+    def failed(self, address: str) -> None:
+        """Take one token from ``address``'s bucket."""
+        now = time.monotonic()
+        with self._lock:
+            if len(self._buckets) >= MAX_TRACKED_ADDRESSES:
+                for full in [a for a, b in self._buckets.items() if self._refilled(a, now).tokens >= self.per_minute]:
+                    del self._buckets[full]
+            bucket = self._refilled(address, now)
+            bucket.tokens = max(0.0, bucket.tokens - 1.0)
+
+
 class Access:
-    """The API's keys and rate limiter (``app.state.access``)."""
+    """The API's keys and rate limiters (``app.state.access``)."""
 
     def __init__(self, settings: Settings) -> None:
         self.keys = load_keys(settings)
         self.limiter = RateLimiter(settings.rate_limit_per_minute) if settings.rate_limit_per_minute else None
+        self.failures = FailureLimiter(settings.auth_failures_per_minute) if settings.auth_failures_per_minute else None
 
     def owner(self, request: Request) -> str | None:
         """The caller's owner id (None when keys are off); 401 without a valid key, 429 past its rate."""
@@ -98,9 +144,19 @@ class Access:
         if not key:
             raise ProblemError(401, "API key required", "send your API key as 'Authorization: Bearer <key>' or "
                                "'X-API-Key: <key>'", UNAUTHORIZED, headers={"WWW-Authenticate": "Bearer"})
+        address = request.client.host if request.client is not None else "-"
+        if self.failures is not None:
+            wait = self.failures.wait_s(address)
+            if wait > 0:  # checked before the key: while limited, a guess tells nothing
+                retry = max(1, math.ceil(wait))
+                raise ProblemError(429, "Too many unknown keys", f"this address sent more than "
+                                   f"{self.failures.per_minute} unknown API keys in a minute; retry after {retry} s",
+                                   RATE_LIMITED, headers={"Retry-After": str(retry)})
         digest = hashlib.sha256(key.encode()).hexdigest()
         owner = next((o for d, o in self.keys.items() if hmac.compare_digest(d, digest)), None)
         if owner is None:
+            if self.failures is not None:
+                self.failures.failed(address)
             raise ProblemError(401, "Unknown API key", "the API key sent is not one of this service's",
                                UNAUTHORIZED, headers={"WWW-Authenticate": 'Bearer error="invalid_token"'})
         if self.limiter is not None:
@@ -122,16 +178,33 @@ async def caller(request: Request) -> str | None:
 
 
 def job_of(request: Request, job_id: str) -> JobRecord:
-    """The job ``job_id`` if the caller may see it, else a 404 (the same as for an unknown id)."""
-    record = request.app.state.backend.get(job_id)
-    if record is None or not visible(record.owner, getattr(request.state, "owner", None)):
+    """The job ``job_id`` if the caller may see it, else a 404 (the same as for an unknown id).
+
+    With keys on, whether the caller may see the job is asked first, in one lookup that costs the same
+    for an unknown id and another key's job (the record, its result included, is read only when the
+    caller may see it): the 404s are alike in status, body and work, so their timing tells nothing.
+    """
+    backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
+    find = getattr(backend, "find", None)
+    if find is not None:  # queue mode: the visibility lookup and the broker scan (service.backends.queue)
+        record = find(job_id, owner)
+    else:
+        store = getattr(backend, "store", None)
+        hidden = owner is not None and store is not None and not store.visible(job_id, owner)
+        record = None if hidden else backend.get(job_id)
+    if record is None or not visible(record.owner, owner):
         raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
     return record
 
 
 def ensemble_of(request: Request, ensemble_id: str) -> dict[str, Any]:
-    """The ensemble's record if the caller may see it, else a 404 (the same as for an unknown id)."""
-    record = request.app.state.backend.ensembles.record(ensemble_id)
+    """The ensemble's record if the caller may see it, else a 404 (the same as for an unknown id).
+
+    As for a job (:func:`job_of`), with keys on the visibility is asked first in one lookup that costs
+    the same for an unknown id and another key's ensemble; the record is read only when it is visible.
+    """
+    store, owner = request.app.state.backend.ensembles, getattr(request.state, "owner", None)
+    record = None if owner is not None and not store.visible(ensemble_id, owner) else store.record(ensemble_id)
     if record is None or not visible(record.get("owner"), getattr(request.state, "owner", None)):
         raise ProblemError(404, "Unknown ensemble", f"no ensemble with id {ensemble_id!r}", NOT_FOUND)
     return record

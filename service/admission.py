@@ -4,21 +4,32 @@ A symbolic request occupies one of ``symbolic_workers`` slots while its child pr
 (:mod:`service.isolated`); up to ``symbolic_queue`` more wait for a slot. A request beyond both is
 refused at once with a 503 problem and ``Retry-After`` (the expected wait), instead of taking a
 request thread until it times out: the API's threads, and ``/health``, stay free under any load.
+
+Work (jobs, ensembles, paper reports) is admitted and submitted in one step, :func:`admit_job` and
+:func:`admit_ensemble`, so that concurrent requests cannot all see room for one more: a key has at
+most ``max_active_jobs_per_key`` queued or running jobs, and the queue at most ``max_queued_messages``
+jobs and ensemble chunks (an ensemble counts each chunk). In queue mode (several API processes) the
+backend keeps both atomically (an advisory lock per owner in PostgreSQL, a reservation in Redis: see
+:mod:`service.backends.queue`); in embedded mode (one API process) a process lock does.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+import threading
 import time
-from collections.abc import AsyncIterator
-from contextlib import asynccontextmanager
+from collections.abc import AsyncIterator, Iterator
+from contextlib import asynccontextmanager, contextmanager
+from typing import Any
 
 from fastapi import Request
 
-from schemas.problems import OVERLOADED, QUEUE_FULL
+from schemas.problems import OVERLOADED, QUEUE_FULL, FieldError
 from schemas.settings import Settings
-from service.errors import ProblemError
+from service.backends.base import JobRecord, QueueFull
+from service.errors import ProblemError, invalid_request
+from store.jobs import ActiveBoundReached
 
 #: Seconds assumed for a request before any has finished (for ``Retry-After``).
 _FIRST_GUESS_S = 5.0
@@ -79,21 +90,71 @@ class SymbolicPool:
 
 #: Seconds a client is told to wait when its key has too many active jobs or the queue is full.
 QUEUE_FULL_RETRY_S = 10
+#: Admissions of a backend without ``atomic_admission`` (embedded mode: one API process), one at a time.
+_PROCESS_LOCK = threading.Lock()
 
 
-def admit_work(request: Request) -> None:
-    """Refuse new work (429 with ``Retry-After``) beyond the caller's key's bound on queued and running
-    jobs, or beyond the bound on messages waiting in the queue."""
+def _too_many_jobs(active: int, settings: Settings) -> ProblemError:
+    return ProblemError(429, "Too many jobs", f"this key has {active} queued or running jobs, the most it may have "
+                        f"(max_active_jobs_per_key={settings.max_active_jobs_per_key}); retry when some have finished",
+                        QUEUE_FULL, headers={"Retry-After": str(QUEUE_FULL_RETRY_S)})
+
+
+def _queue_full(waiting: int, messages: int, settings: Settings) -> ProblemError:
+    what = "a job" if messages == 1 else f"{messages} ensemble chunks"
+    return ProblemError(429, "Queue full", f"{waiting} jobs and ensemble chunks wait in the queue (or are being sent); "
+                        f"{what} more would exceed what it holds (max_queued_messages={settings.max_queued_messages}); "
+                        "retry later", QUEUE_FULL, headers={"Retry-After": str(QUEUE_FULL_RETRY_S)})
+
+
+@contextmanager
+def _admitted(request: Request, messages: int, adds_a_job: bool) -> Iterator[int | None]:
+    """Room for ``messages`` in the queue (and, if ``adds_a_job``, one more active job of the caller's key)
+    while the body submits; yields the per-key bound the backend keeps itself when it records the job
+    (queue mode), None when it is kept here. Raises the 429 problems."""
     settings: Settings = request.app.state.settings
     backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
-    if owner is not None:
-        active = backend.active_jobs(owner)
-        if active >= settings.max_active_jobs_per_key:
-            raise ProblemError(429, "Too many jobs", f"this key has {active} queued or running jobs, the most it may "
-                               f"have (max_active_jobs_per_key={settings.max_active_jobs_per_key}); retry when some "
-                               "have finished", QUEUE_FULL, headers={"Retry-After": str(QUEUE_FULL_RETRY_S)})
-    waiting = backend.queued_messages()
-    if waiting >= settings.max_queued_messages:
-        raise ProblemError(429, "Queue full", f"{waiting} jobs and ensemble chunks wait in the queue, the most it "
-                           f"holds (max_queued_messages={settings.max_queued_messages}); retry later", QUEUE_FULL,
-                           headers={"Retry-After": str(QUEUE_FULL_RETRY_S)})
+    if messages > settings.max_queued_messages:  # schemas.ensembles refuses these before any work: a safeguard
+        raise invalid_request([FieldError(field="members", reason=(
+            f"{messages} chunks exceed what the queue holds (max_queued_messages={settings.max_queued_messages})"))])
+    if getattr(backend, "atomic_admission", False):
+        if owner is not None and not adds_a_job:  # an ensemble adds no job: a plain check is exact enough
+            active = backend.active_jobs(owner)
+            if active >= settings.max_active_jobs_per_key:
+                raise _too_many_jobs(active, settings)
+        try:
+            with backend.reserve_messages(messages, settings.max_queued_messages):
+                yield settings.max_active_jobs_per_key if owner is not None and adds_a_job else None
+        except QueueFull as exc:
+            raise _queue_full(exc.waiting + exc.pending, messages, settings) from None
+        except ActiveBoundReached as exc:
+            raise _too_many_jobs(exc.active, settings) from None
+        return
+    with _PROCESS_LOCK:
+        if owner is not None:
+            active = backend.active_jobs(owner)
+            if active >= settings.max_active_jobs_per_key:
+                raise _too_many_jobs(active, settings)
+        waiting = backend.queued_messages()
+        if waiting + messages > settings.max_queued_messages:
+            raise _queue_full(waiting, messages, settings)
+        yield None
+
+
+def admit_job(request: Request, body: dict[str, Any]) -> JobRecord:
+    """Admit and submit a job (or a paper report) of the caller's key: a 429 problem with ``Retry-After``
+    if the key has ``max_active_jobs_per_key`` active jobs or the queue is full, else the queued job."""
+    backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
+    with _admitted(request, 1, adds_a_job=True) as max_active:
+        if max_active is None:
+            return backend.submit(body, owner)
+        return backend.submit(body, owner, max_active=max_active)
+
+
+def admit_ensemble(request: Request, spec: dict[str, Any], chunks: list[tuple[int, int]]) -> str:
+    """Admit and submit an ensemble: its chunks count against ``max_queued_messages`` (all of them fit
+    with what is queued, or a 429 problem with ``Retry-After``); returns the ensemble's id."""
+    backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
+    with _admitted(request, len(chunks), adds_a_job=False):
+        ensemble_id, _ = backend.submit_ensemble(spec, chunks, owner)
+    return ensemble_id

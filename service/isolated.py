@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
@@ -22,12 +23,13 @@ GRACE_S = 10.0
 
 _CONTEXT = multiprocessing.get_context("forkserver")
 _CONTEXT.set_forkserver_preload(["nonholonomic.reducing_multiplier", "nonholonomic.evidence.brackets",
-                                 "service.routes.symbolic"])
+                                 "service.routes.symbolic", "service.validation", "service.fork_server_warm"])
 
 
 def start_fork_server() -> None:
-    """Start the fork server and wait for its preloaded imports (about a second of CPU), at the API's
-    start-up: during the first symbolic requests it would take a core from them and from ``/health``.
+    """Start the fork server and wait for its preloaded imports and warm-up (a few seconds of CPU,
+    :mod:`service.fork_server_warm`), at the API's start-up: during the first symbolic requests and
+    validations it would take a core from them and from ``/health``.
     A failure (e.g. an interpreter whose main module cannot be re-imported) is logged, not raised: the
     API serves everything else, and a symbolic request reports it."""
     try:
@@ -41,15 +43,38 @@ def _nothing() -> None:
 
 
 class IsolatedTimeout(RuntimeError):
-    """The child did not answer within its hard limit and was killed."""
+    """The child did not answer within its hard limit and was killed.
+
+    ``progress`` is the last value the child sent with :func:`report_progress` (None if none)."""
+
+    def __init__(self, message: str, progress: Any = None) -> None:
+        super().__init__(message)
+        self.progress = progress
+
+
+#: In a child: the connection to the parent (for :func:`report_progress`); None elsewhere.
+_TO_PARENT: Connection | None = None
+
+
+def report_progress(value: Any) -> None:
+    """In a child of :func:`run_isolated`: tell the parent where the work is (a picklable value; the
+    last one is in :class:`IsolatedTimeout` if the child is killed). Elsewhere: nothing."""
+    if _TO_PARENT is not None:
+        _TO_PARENT.send(("progress", value))
 
 
 def _child(connection: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+    global _TO_PARENT
+    _TO_PARENT = connection
     try:
         connection.send(("ok", fn(*args)))
+    except BrokenPipeError:  # the parent gave up at the hard limit: nobody is listening
+        pass
     except Exception as exc:  # sent back and re-raised in the parent (ValueError → 422 there)
         try:
             connection.send(("error", exc))
+        except BrokenPipeError:
+            pass
         except Exception:  # an exception that does not pickle
             connection.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
     finally:
@@ -68,13 +93,19 @@ def run_isolated(fn: Callable[..., Any], args: tuple[Any, ...], limit_s: float) 
     process = _CONTEXT.Process(target=_child, args=(sender, fn, args), daemon=True, name="symbolic-request")
     process.start()
     sender.close()
+    deadline, progress = time.monotonic() + limit_s, None
     try:
-        if not receiver.poll(limit_s):
-            raise IsolatedTimeout(f"the symbolic work did not finish within {limit_s:g} s and was stopped")
-        try:
-            status, value = receiver.recv()
-        except EOFError:
-            raise RuntimeError(f"the symbolic worker process died (exit code {process.exitcode})") from None
+        while True:
+            if not receiver.poll(max(deadline - time.monotonic(), 0.0)):
+                raise IsolatedTimeout(f"the symbolic work did not finish within {limit_s:g} s and was stopped",
+                                      progress)
+            try:
+                status, value = receiver.recv()
+            except EOFError:
+                raise RuntimeError(f"the symbolic worker process died (exit code {process.exitcode})") from None
+            if status != "progress":
+                break
+            progress = value
     finally:
         receiver.close()
         process.join(timeout=1.0)

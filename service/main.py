@@ -10,6 +10,7 @@ from contextlib import asynccontextmanager
 
 from fastapi import Depends, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
 import nonholonomic
@@ -22,6 +23,12 @@ from service.idempotency import idempotency_store
 from service.isolated import start_fork_server
 from service.limits import BodyLimit
 from service.routes import ensembles, health, jobs, maps, pages, report, symbolic, systems
+from service.security import SecurityHeaders
+
+#: Where the pages' stylesheet and icon are served (``service/static``; no API key needed).
+STATIC_URL = "/static"
+#: Swagger UI and ReDoc (their own, looser content security policy: :data:`service.security.DOCS_POLICY`).
+DOCS_URL, REDOC_URL = "/docs", "/redoc"
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -40,6 +47,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             app.state.backend.close()
 
     app = FastAPIOffline(  # /docs and /redoc from files in the package, no CDN
+        docs_url=DOCS_URL,
+        redoc_url=REDOC_URL,
         title="nonholonomic",
         version=nonholonomic.__version__,
         summary="Nonholonomic mechanics with machine-checked evidence (Borisov & Mamaev, "
@@ -63,7 +72,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in (systems.router, jobs.router, ensembles.router, symbolic.router, maps.router, report.router,
                    pages.router):
         app.include_router(router, **keyed)  # type: ignore[arg-type]
+    app.mount(STATIC_URL, StaticFiles(packages=[("service", "static")]), name="static")
+    _secure(app)
     return app
+
+
+def _secure(app: FastAPI) -> None:
+    """Security headers (:mod:`service.security`) on every answer, the 500s included: the middleware
+    wraps the whole stack, outside Starlette's ServerErrorMiddleware (``add_middleware`` would sit inside it)."""
+    docs = frozenset(p for p in (DOCS_URL, REDOC_URL, app.swagger_ui_oauth2_redirect_url) if p)
+    build = app.build_middleware_stack
+    app.build_middleware_stack = lambda: SecurityHeaders(build(), docs)  # type: ignore[method-assign]
 
 
 app = create_app()

@@ -10,7 +10,12 @@ parameters; this service answers every error as ``application/problem+json`` (:m
 - an error response declared with ``model=Problem`` (FastAPI puts it under ``application/json``)
   moves to ``application/problem+json``;
 - ``Problem`` and ``FieldError`` are in the components, ``HTTPValidationError`` and
-  ``ValidationError`` are not.
+  ``ValidationError`` are not;
+- every operation with a request body declares the 413 of :class:`service.limits.BodyLimit`.
+
+:func:`state_limits` then writes this deployment's limits (:class:`schemas.settings.Settings`:
+``max_t_final``, ``max_samples`` ...) into the request schemas as ``maximum`` / ``maxItems``, so that
+a body the document calls valid is not refused for a limit it did not state.
 
 Operation ids are explicit on every route (``operation_id="<tag>-<verb>"``, e.g. ``jobs-submit``);
 :func:`operation_id` is a fallback of the same shape for a route that forgets it.
@@ -27,6 +32,7 @@ from fastapi.routing import APIRoute
 from pydantic.json_schema import models_json_schema
 
 from schemas.problems import PROBLEM_MEDIA_TYPE, FieldError, Problem
+from schemas.settings import Settings
 
 REF_PREFIX = "#/components/schemas/"
 _FASTAPI_VALIDATION = REF_PREFIX + "HTTPValidationError"
@@ -46,6 +52,21 @@ def operation_id(route: APIRoute) -> str:
     tag = str(route.tags[0]).split()[0].lower() if route.tags else "api"
     words = [w for w in re.split(r"[^a-z]+", route.name.lower()) if w and w != tag]
     return "-".join([tag, *(words or [next(iter(sorted(route.methods or {"get"}))).lower()])])
+
+
+#: The 413 every operation with a body may answer (:class:`service.limits.BodyLimit`).
+TOO_LARGE_DESCRIPTION = "the request body is larger than this service accepts (NONHOLONOMIC_MAX_BODY_BYTES)"
+#: Where each limit of the settings applies: (schema, property) -> (setting, JSON Schema keyword).
+SETTING_LIMITS: dict[tuple[str, str], tuple[str, str]] = {
+    ("JobRequest", "t_final"): ("max_t_final", "maximum"),
+    ("JobRequest", "samples"): ("max_samples", "maximum"),
+    ("EnsembleRequest", "t_final"): ("max_t_final", "maximum"),
+    ("EnsembleRequest", "samples"): ("max_samples", "maximum"),
+    ("PoincareRequest", "max_points"): ("max_section_points", "maximum"),
+    ("SampleMembers", "count"): ("max_ensemble_members", "maximum"),
+    ("SweepMembers", "values"): ("max_ensemble_members", "maxItems"),
+    ("MembersSpec", "initial_states"): ("max_ensemble_members", "maxItems"),
+}
 
 
 def _can_fail_validation(operation: dict[str, Any]) -> bool:
@@ -80,6 +101,8 @@ def finalize(document: dict[str, Any]) -> dict[str, Any]:
                         del responses[status]
                 elif schema.get("$ref") == _PROBLEM and not str(status).startswith("2"):
                     content[PROBLEM_MEDIA_TYPE] = content.pop("application/json")
+            if "requestBody" in operation:
+                responses.setdefault("413", {"description": TOO_LARGE_DESCRIPTION, "content": _problem_content()})
     schemas = document.setdefault("components", {}).setdefault("schemas", {})
     _, definitions = models_json_schema([(Problem, "serialization"), (FieldError, "serialization")],
                                         ref_template=REF_PREFIX + "{model}")
@@ -92,11 +115,29 @@ def finalize(document: dict[str, Any]) -> dict[str, Any]:
     return document
 
 
+def state_limits(document: dict[str, Any], settings: Settings) -> dict[str, Any]:
+    """Write the limits of ``settings`` into the request schemas of ``document`` (in place, idempotent;
+    see :data:`SETTING_LIMITS`); returns it."""
+    schemas = document.get("components", {}).get("schemas", {})
+    for (name, prop), (setting, keyword) in SETTING_LIMITS.items():
+        schema = schemas.get(name, {}).get("properties", {}).get(prop)
+        if schema is None:
+            continue
+        limit = getattr(settings, setting)
+        # the non-null branch of an optional field, else the field itself
+        for target in [b for b in schema.get("anyOf", []) if b.get("type") != "null"] or [schema]:
+            target[keyword] = min(target.get(keyword, limit), limit)
+    return document
+
+
 def install_openapi(app: FastAPI) -> None:
-    """Serve the finalized document at ``/openapi.json`` (and to ``/docs``)."""
+    """Serve the finalized document, with the limits of ``app.state.settings``, at ``/openapi.json``
+    (and to ``/docs``)."""
     generate: Callable[[], dict[str, Any]] = app.openapi
 
     def openapi() -> dict[str, Any]:
-        return finalize(generate())
+        document = finalize(generate())
+        settings = getattr(app.state, "settings", None)
+        return state_limits(document, settings) if settings is not None else document
 
     app.openapi = openapi  # type: ignore[method-assign]

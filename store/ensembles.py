@@ -2,10 +2,10 @@
 job store's database (SQLAlchemy; the schema is migrated with the jobs', :meth:`store.jobs.JobStore.migrate`).
 
 An ensemble counts its finished chunks by their ``done`` flag, and a chunk's members are written
-with that flag in one statement, so a chunk that runs twice (redelivered after its worker died, or
-sent again after the broker lost its messages) replaces its own results with the same numbers and is
-counted once. Ensembles are deleted ``ttl_s`` after their creation once none of their chunks is
-pending (or they were cancelled).
+with that flag in one statement, only while it is not set: a chunk that runs twice (redelivered after
+its worker died or was cut off, or sent again after the broker lost its messages) keeps the results of
+its first run to finish and is counted once. Ensembles are deleted ``ttl_s`` after their creation
+once none of their chunks is pending (or they were cancelled).
 """
 
 from __future__ import annotations
@@ -70,10 +70,15 @@ class EnsembleStore:
                     .values(members_done=members_done))
 
     def store_chunk(self, ensemble_id: str, chunk: int, members: list[dict[str, Any]],
-                    digests: list[dict[str, Any]], worker: str) -> None:
-        """A chunk's members' results and digests, and ``done``, in one statement."""
-        self._update_chunk(ensemble_id, chunk, members=members, digests=digests, worker=worker, done=True,
-                           members_done=len(members))
+                    digests: list[dict[str, Any]], worker: str) -> bool:
+        """A chunk's members' results and digests, and ``done``, in one statement, unless the chunk is
+        done already: the first run to finish is the one kept, and a late run (its worker was cut off
+        while another ran the chunk again) changes nothing. True if this call stored the chunk."""
+        return changed_one(self._autocommit, update(EnsembleChunkRow)
+                           .where(EnsembleChunkRow.ensemble_id == ensemble_id, EnsembleChunkRow.chunk == chunk,
+                                  EnsembleChunkRow.done.is_(False))
+                           .values(members=members, digests=digests, worker=worker, done=True,
+                                   members_done=len(members)))
 
     def _update_chunk(self, ensemble_id: str, chunk: int, **values: Any) -> None:
         changed_one(self._autocommit, update(EnsembleChunkRow)
@@ -119,6 +124,13 @@ class EnsembleStore:
                 "digests": {c.chunk: c.digests for c in chunks if c.done},
                 "workers": {c.chunk: c.worker for c in chunks if c.done},
                 "starts": {c.chunk: c.starts for c in chunks if c.starts}}
+
+    def visible(self, ensemble_id: str, owner: str) -> bool:
+        """Whether ``owner`` may see the ensemble (its own, or one without an owner): one indexed
+        lookup that costs the same whether the ensemble does not exist or is another owner's."""
+        with self._session() as session:
+            return session.scalar(select(EnsembleRow.id).where(
+                EnsembleRow.id == ensemble_id, or_(EnsembleRow.owner == owner, EnsembleRow.owner.is_(None)))) is not None
 
     def spec(self, ensemble_id: str) -> tuple[dict[str, Any], list[tuple[int, int]]] | None:
         """The request and the chunks' member ranges."""

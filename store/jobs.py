@@ -8,6 +8,7 @@ only act on a job that has not ended). Finished jobs are deleted ``ttl_s`` after
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -27,6 +28,9 @@ _JOBS = JobRow.__table__
 ACTIVE = ("queued", "running")
 #: Statuses of a job that ended.
 ENDED = ("succeeded", "failed", "cancelled")
+#: First key of the PostgreSQL advisory locks that serialize one owner's admissions (the second is the
+#: owner's CRC-32): two owners sharing a CRC only wait for each other.
+OWNER_LOCK_CLASS = 726458
 #: The columns of a job read without its result (lists, resumption).
 _WITHOUT_RESULT = (JobRow.id, JobRow.status, JobRow.request, JobRow.created_at, JobRow.created, JobRow.owner,
                    JobRow.error, JobRow.attempts)
@@ -46,6 +50,19 @@ class StoredJob:
     error: dict[str, Any] | None = None
     attempts: int = 0
     queue: str | None = None
+
+
+class ActiveBoundReached(Exception):
+    """The owner already has ``active`` queued or running jobs, its bound: nothing was recorded."""
+
+    def __init__(self, active: int) -> None:
+        super().__init__(f"{active} active jobs")
+        self.active = active
+
+
+def owner_lock_key(owner: str) -> tuple[int, int]:
+    """The two int4 keys of ``owner``'s advisory lock (``pg_advisory_xact_lock(k1, k2)``)."""
+    return OWNER_LOCK_CLASS, zlib.crc32(owner.encode()) - (1 << 31)
 
 
 def _now() -> datetime:
@@ -136,15 +153,46 @@ class JobStore:
         return changed_one(self._autocommit, statement)
 
     def create(self, job_id: str, request: dict[str, Any], owner: str | None = None, queue: str | None = None,
-               broker_epoch: str | None = None) -> str:
+               broker_epoch: str | None = None, max_active: int | None = None) -> str:
         """Record a queued job (sent to ``queue`` in the broker's ``broker_epoch``); returns its
-        ``created_at`` (ISO 8601, UTC)."""
+        ``created_at`` (ISO 8601, UTC).
+
+        With ``max_active`` (and an ``owner``) the job is recorded only if the owner has fewer queued
+        or running jobs: the count and the insert run in one transaction under the owner's advisory
+        lock (PostgreSQL), so concurrent submissions of one owner, from any number of API processes,
+        cannot both see room for one more. Raises :class:`ActiveBoundReached` otherwise.
+        """
         now = _now()
-        self._changed(insert(_JOBS).values(id=job_id, owner=owner, status="queued", request=request,
-                                           created=now.timestamp(), created_at=now.isoformat(), attempts=0,
-                                           queue=queue, broker_epoch=broker_epoch))
+        row = insert(_JOBS).values(id=job_id, owner=owner, status="queued", request=request, created=now.timestamp(),
+                                   created_at=now.isoformat(), attempts=0, queue=queue, broker_epoch=broker_epoch)
+        if max_active is None or owner is None:
+            self._changed(row)
+        else:
+            self._create_bounded(row, owner, max_active)
         self._expiry.now_and_then(now.timestamp())
         return now.isoformat()
+
+    def _create_bounded(self, row: Any, owner: str, max_active: int) -> None:
+        # The lock is the transaction's: released by its commit or rollback, or when the connection
+        # dies with the API process (no lease to outlive it). On SQLite (one embedded API process) the
+        # caller's process lock does this job.
+        with self.engine.connect() as connection:
+            try:
+                with connection.begin():
+                    if connection.dialect.name == "postgresql":
+                        first, second = owner_lock_key(owner)
+                        connection.execute(text("SELECT pg_advisory_xact_lock(:first, :second)"),
+                                           {"first": first, "second": second})
+                    active = int(connection.scalar(select(func.count()).select_from(_JOBS).where(
+                        _JOBS.c.owner == owner, _JOBS.c.status.in_(ACTIVE))) or 0)
+                    if active >= max_active:
+                        raise ActiveBoundReached(active)
+                    connection.execute(row)
+            except ActiveBoundReached:
+                raise
+            except BaseException:
+                connection.invalidate()  # as store.statements.changed_one: never pool a busy connection
+                raise
 
     def ensure(self, job_id: str, request: dict[str, Any], queue: str | None = None,
                broker_epoch: str | None = None) -> bool:
@@ -236,6 +284,20 @@ class JobStore:
         with self.engine.connect() as connection:
             row = connection.execute(select(_JOBS).where(_JOBS.c.id == job_id)).first()
         return None if row is None else self._stored(row, with_result=True)
+
+    def visible(self, job_id: str, owner: str) -> bool:
+        """Whether ``owner`` may see the job ``job_id`` (its own, or one without an owner): one indexed
+        lookup that costs the same whether the job does not exist or is another owner's."""
+        with self.engine.connect() as connection:
+            return connection.scalar(select(_JOBS.c.id).where(
+                _JOBS.c.id == job_id, or_(_JOBS.c.owner == owner, _JOBS.c.owner.is_(None)))) is not None
+
+    def existing(self, job_ids: list[str]) -> set[str]:
+        """Those of ``job_ids`` that are recorded (one query)."""
+        if not job_ids:
+            return set()
+        with self.engine.connect() as connection:
+            return set(connection.scalars(select(_JOBS.c.id).where(_JOBS.c.id.in_(job_ids))))
 
     def status(self, job_id: str) -> str | None:
         with self.engine.connect() as connection:

@@ -59,6 +59,15 @@ def make_app() -> Celery:
         broker_connection_retry_on_startup=True,
         # The warm-up compiles every integrator in each child before it takes jobs.
         worker_proc_alive_timeout=300.0,
+        # Progress writes are best-effort (workers.tasks._Progress): one quick retry, not Celery's 20
+        # (~19 s of a job stalled per write while Redis is away)
+        result_backend_transport_options={"retry_policy": {"max_retries": 1, "interval_start": 0.2,
+                                                           "interval_step": 0.2, "interval_max": 0.2}},
+        # A pool process past this resident memory (KiB) after a job is replaced by a fresh one, which warms
+        # up before it says so (_warm_up): the code heyoka compiled for many distinct user expressions is
+        # not all given back (bench/README.md, bench_user_potentials.py --worker)
+        worker_max_memory_per_child=settings.worker_max_memory_mib * 1024 or None,
+        worker_max_tasks_per_child=settings.worker_max_jobs or None,
     )
     return celery
 

@@ -19,6 +19,7 @@ from schemas.ensembles import EnsembleRequest
 from schemas.results import member_to_json
 from store.ensembles import EnsembleStore
 from workers.job_store import write_until_stored
+from workers.limits import Deadline
 
 #: Seconds between progress writes (and cancellation checks) of a running chunk.
 PROGRESS_INTERVAL_S = 0.2
@@ -32,7 +33,7 @@ def chunk_task_id(ensemble_id: str, chunk: int) -> str:
 
 
 def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worker: str,
-                       stopping: Callable[[], bool] = lambda: False) -> str:
+                       stopping: Callable[[], bool] = lambda: False, time_limit_s: float | None = None) -> str:
     """Run chunk ``chunk`` of an ensemble and store its members' results.
 
     Returns what happened: ``"done"``, ``"already done"`` (a redelivered chunk whose results are
@@ -41,7 +42,9 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
     bug, a time limit) stores every one of its members as failed with the reason, so the ensemble
     still completes. While the database is away, progress is not written and the results are
     written when it is back (:func:`workers.job_store.write_until_stored`); an error reading the
-    ensemble before the chunk starts is raised (the caller tries again later).
+    ensemble before the chunk starts is raised (the caller tries again later). ``time_limit_s``: the
+    chunk's soft time limit, checked at its progress reports (its members then fail with
+    :class:`workers.limits.JobTimeout`).
     """
     if store.is_cancelled(ensemble_id):
         return "cancelled"
@@ -54,6 +57,7 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
     store.mark_started(ensemble_id, chunk)
     request = EnsembleRequest.model_validate(spec[0])
     last = [time.monotonic()]
+    deadline = Deadline(time_limit_s) if time_limit_s is not None else None
 
     def progress(fraction: float) -> bool:
         now = time.monotonic()
@@ -62,6 +66,8 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
         last[0] = now
         if stopping():
             return False
+        if deadline is not None:
+            deadline.check()
         try:
             if store.is_cancelled(ensemble_id):
                 return False

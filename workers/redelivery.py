@@ -19,6 +19,11 @@ lease does it instead:
 The old message still comes back after the visibility timeout; by then the job is finished and the
 task ends without running (a finished job's record says so, an ensemble chunk is marked done), so a
 client never sees a job finish twice.
+
+A worker that was only cut off (its host unreachable, not dead) may still end the task late, after a
+live worker took it again: its late results change nothing (:meth:`store.ensembles.EnsembleStore.store_chunk`
+keeps the first), and its end deletes the key only if it still names it as the owner, not the key of
+the worker that holds the task now.
 """
 
 from __future__ import annotations
@@ -49,16 +54,39 @@ def record_received(client: redis.Redis, owner: str, task_id: str, name: str, ar
     client.set(inflight_key(task_id), value, ex=ttl_s)
 
 
-def record_ended(client: redis.Redis, task_id: str) -> None:
-    client.delete(inflight_key(task_id))
+#: Delete KEYS[1] if it holds a task of the owner ARGV[1] (one atomic step in Redis).
+_DELETE_IF_OWNER = """
+local held = redis.call('GET', KEYS[1])
+if held and cjson.decode(held)['owner'] == ARGV[1] then
+  return redis.call('DEL', KEYS[1])
+end
+return 0
+"""
+
+
+def own_worker_key() -> str:
+    """The heartbeat key of the worker this process serves: its own in the worker's main process (or a
+    thread of it), its parent's in a pool process."""
+    import os
+
+    from billiard.process import current_process
+
+    from workers.heartbeat import worker_key
+
+    return worker_key(os.getpid() if current_process().name == "MainProcess" else os.getppid())
+
+
+def record_ended(client: redis.Redis, task_id: str, owner: str | None = None) -> bool:
+    """Forget that the worker ``owner`` (default: this process's, :func:`own_worker_key`) holds
+    ``task_id``: not if another worker holds it now (it was sent again while this one was cut off).
+    True if the key was deleted."""
+    return bool(client.eval(_DELETE_IF_OWNER, 1, inflight_key(task_id), owner or own_worker_key()))
 
 
 def release_owned(client: redis.Redis, owner: str) -> None:
     """Forget every task ``owner`` holds (a worker stopping cleanly: the broker restores them)."""
     for key in list(client.scan_iter(match=PREFIX + "*", count=1000)):
-        value = client.get(key)
-        if value is not None and json.loads(value).get("owner") == owner:
-            client.delete(key)
+        client.eval(_DELETE_IF_OWNER, 1, key, owner)
 
 
 def sweep(client: redis.Redis, send: Any) -> list[str]:

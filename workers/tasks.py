@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from typing import Any
 
@@ -11,41 +12,65 @@ from sqlalchemy.exc import OperationalError
 
 from nonholonomic.integration import IntegrationCancelled
 from schemas.settings import get_settings
+from workers.broker_messages import request_from_args
 from workers.celery_app import app
 from workers.ensembles import ENSEMBLE_CHUNK, run_ensemble_chunk
-from workers.jobs import InvalidJob, run_job
 from workers.job_store import ensemble_store, job_store, write_until_stored
-from workers.broker_messages import request_from_args
+from workers.jobs import InvalidJob, run_job
+from workers.limits import Deadline, JobTimeout, hard_limit_message, soft_limit_message
 
 #: Seconds between progress updates (and cancellation checks) of a running job.
 PROGRESS_INTERVAL_S = 0.2
 #: Seconds before a job that could not start (the database away) is tried again.
 START_RETRY_S = 5
+#: Seconds without progress writes after one failed (the result backend, Redis, away).
+PROGRESS_BACKOFF_S = 2.0
 
-
-class JobTimeout(RuntimeError):
-    """The job ran past its soft time limit."""
+log = logging.getLogger(__name__)
 
 
 class _Progress:
-    """Reports progress through ``update_state`` and stops the job when it was cancelled (its status in
-    the store, read at most every :data:`PROGRESS_INTERVAL_S`)."""
+    """Reports progress through ``update_state``, stops the job when it was cancelled (its status in
+    the store, read at most every :data:`PROGRESS_INTERVAL_S`) and at its soft time limit
+    (:class:`workers.limits.Deadline`: raises :class:`JobTimeout`, also inside heyoka's loops, where
+    Celery's signal would not act before the hard limit).
 
-    def __init__(self, task: Task, job_id: str) -> None:
-        self.task, self.job_id, self.last = task, job_id, time.monotonic()
+    Progress is best-effort: a write that fails (Redis away) is skipped, the job goes on, and the
+    next write is tried :data:`PROGRESS_BACKOFF_S` later; the job's end goes to the store.
+    """
+
+    def __init__(self, task: Task, job_id: str, deadline: Deadline) -> None:
+        self.task, self.job_id, self.deadline, self.last = task, job_id, deadline, time.monotonic()
+        self.backoff_until = 0.0
 
     def __call__(self, fraction: float) -> bool:
         now = time.monotonic()
         if now - self.last < PROGRESS_INTERVAL_S:
             return True
         self.last = now
+        self.deadline.check()
         try:
             if job_store().status(self.job_id) == "cancelled":
                 return False
         except OperationalError:  # the database is away: the job goes on (a cancellation waits for it)
             pass
-        self.task.update_state(state="PROGRESS", meta={"progress": fraction})
+        if now >= self.backoff_until:
+            self.backoff_until = 0.0 if _best_effort(self.task, "PROGRESS", {"progress": fraction}) \
+                else now + PROGRESS_BACKOFF_S
         return True
+
+
+def _best_effort(task: Task, state: str, meta: dict[str, Any] | None = None) -> bool:
+    """``task.update_state``; False (logged) if the result backend is away."""
+    try:
+        task.update_state(state=state, meta=meta)
+    except (SoftTimeLimitExceeded, JobTimeout):
+        raise
+    except Exception as exc:  # noqa: BLE001 - Redis away (ConnectionError, TimeoutError ...): skipped
+        log.warning("progress of job %s not written (%s: %s); the job goes on", task.request.id,
+                    type(exc).__name__, exc)
+        return False
+    return True
 
 
 def _record_end(job_id: str, status: str, result: dict[str, Any] | None = None,
@@ -60,7 +85,7 @@ class _JobTask(Task):
 
     def on_failure(self, exc: BaseException, task_id: str, args: Any, kwargs: Any, einfo: Any) -> None:
         if isinstance(exc, TimeLimitExceeded):
-            exc = JobTimeout(f"the job was killed at its hard time limit of {get_settings().job_time_limit_s:g} s")
+            exc = JobTimeout(hard_limit_message(get_settings().job_time_limit_s))
         _record_end(task_id, "failed", error={"type": type(exc).__name__, "message": str(exc)})
 
 
@@ -90,12 +115,12 @@ def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
     if refused is not None:
         raise InvalidJob(refused)
     try:
-        result = run_job(request, _Progress(self, job_id))
+        result = run_job(request, _Progress(self, job_id, Deadline(get_settings().job_soft_time_limit_s)))
     except IntegrationCancelled:
-        self.update_state(state=states.REVOKED)
+        _best_effort(self, states.REVOKED)
         raise Ignore() from None
     except SoftTimeLimitExceeded:
-        raise JobTimeout(f"the job exceeded its time limit of {get_settings().job_soft_time_limit_s:g} s") from None
+        raise JobTimeout(soft_limit_message(get_settings().job_soft_time_limit_s)) from None
     _record_end(job_id, "succeeded", result=result)
     return {"status": "succeeded"}
 
@@ -121,6 +146,7 @@ def ensemble_chunk(self: Task, ensemble_id: str, chunk: int) -> str:
     the ensemble's record, the task's own result is only what happened (``done``, ``cancelled`` ...).
     A database that is away when the chunk starts: tried again in a few seconds."""
     try:
-        return run_ensemble_chunk(ensemble_store(), ensemble_id, chunk, self.request.hostname or "worker")
+        return run_ensemble_chunk(ensemble_store(), ensemble_id, chunk, self.request.hostname or "worker",
+                                  time_limit_s=get_settings().job_soft_time_limit_s)
     except OperationalError as exc:
         raise self.retry(exc=exc, countdown=START_RETRY_S, max_retries=None) from None

@@ -53,7 +53,7 @@ import numpy as np
 import sympy as sp
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.expressions import ExpressionError, parse_expression
+from nonholonomic.expressions import ExpressionError, integrable, parse_expression
 from nonholonomic.integration import MACHINE_EPSILON, IntegrationCancelled, IntegrationError, ProgressCallback
 from nonholonomic.kernels import VectorKernel
 from nonholonomic.taylor import TaylorSystem, taylor_system
@@ -177,6 +177,10 @@ def _parse_surface(system: MechanicalSystem, text: str) -> sp.Expr:
         raise SurfaceError("surface", "a surface must be a smooth function of the state (abs and sign are not "
                                       "smooth; e.g. write gamma3, not abs(gamma3))",
                            match.start() if match else None)
+    try:
+        integrable(expr)  # heyoka's translation takes rational exponents only (x**pi would recurse)
+    except ExpressionError as err:
+        raise SurfaceError("surface", err.reason) from None
     try:
         taylor_system(system).expression(_heyoka_ready(expr))
     except (TypeError, ValueError) as exc:  # pragma: no cover - every parser function is translatable
@@ -557,6 +561,43 @@ def _next_segment(t_final: float, t_now: float, steps: float, crossings: int, re
 _GOOD = (hy.taylor_outcome.time_limit, hy.taylor_outcome.success)
 
 
+#: A piece of SEGMENT_MAX_STEPS steps that gains less than this many ``eps·max(|t|, 1)`` per step has stalled.
+STALL_STEP_ULPS = 1024.0
+
+
+def _stalled_at(before: float, after: float) -> bool:
+    """Whether a piece of :data:`SEGMENT_MAX_STEPS` steps from ``before`` to ``after`` stalled: steps at the
+    rounding of ``t`` (an event function not finite or not smooth where the orbit is: heyoka's steps
+    shrink to nothing and never get past it)."""
+    return after - before <= SEGMENT_MAX_STEPS * STALL_STEP_ULPS * MACHINE_EPSILON * max(abs(after), 1.0)
+
+
+def _stalled(t: float) -> str:
+    return (f"heyoka's steps shrank to nothing at t = {t:g}: the surface is not finite or not smooth where the "
+            "orbit meets it (e.g. sqrt or a fractional power at 0), so its crossings cannot be located")
+
+
+def _propagate(ta: hy.taylor_adaptive, t_next: float, t_final: float,
+               progress: ProgressCallback | None) -> tuple[hy.taylor_outcome, float, int]:
+    """``propagate_until(t_next)`` in pieces of at most :data:`SEGMENT_MAX_STEPS` steps, asking ``progress``
+    between them (a cancellation or a time limit acts within one piece). Returns the outcome, the largest
+    step and the steps taken. An event function that is not finite at the orbit makes heyoka take empty
+    steps forever: a piece that gains (next to) no time raises :class:`IntegrationError`."""
+    steps, max_h = 0, 0.0
+    while True:
+        before = ta.time
+        outcome, _, piece_max_h, nsteps, _, _ = ta.propagate_until(t_next, max_steps=SEGMENT_MAX_STEPS)
+        steps += nsteps
+        if math.isfinite(piece_max_h):
+            max_h = max(max_h, abs(piece_max_h))
+        if outcome != hy.taylor_outcome.step_limit:
+            return outcome, max_h, steps
+        if _stalled_at(before, ta.time):
+            raise IntegrationError(_stalled(ta.time))
+        if progress is not None and not progress(min(ta.time / t_final, 1.0)):
+            raise IntegrationCancelled(f"cancelled at t = {ta.time:g}")
+
+
 # --------------------------------------------------------------------------------------------------
 # Post-processing: Newton step onto the surface, points, coordinates, residual, drift
 # --------------------------------------------------------------------------------------------------
@@ -693,7 +734,7 @@ def section(
     seg = SEGMENT_FRACTION * req.t_final
     while True:
         t_next = req.t_final if t_now + 1.001 * seg >= req.t_final else t_now + seg
-        outcome, _, seg_max_h, nsteps, _, _ = ta.propagate_until(t_next)
+        outcome, seg_max_h, nsteps = _propagate(ta, t_next, req.t_final, progress)
         steps += nsteps
         max_h = max(max_h, abs(seg_max_h)) if math.isfinite(seg_max_h) else max_h
         if outcome != hy.taylor_outcome.time_limit:
@@ -805,22 +846,30 @@ def _run_batch(req: _Request, ta: hy.taylor_adaptive_batch, recorder: _BatchCros
     while any(active(i) for i in range(batch)):
         t_next = req.t_final if t_now + 1.001 * seg >= req.t_final else t_now + seg
         while True:  # until every lane reaches t_next; a failing lane is replaced and the rest resume
-            ta.propagate_until(t_next)
-            bad = []
+            before = np.array(ta.time)
+            ta.propagate_until(t_next, max_steps=SEGMENT_MAX_STEPS)  # bounded: progress is asked in between
+            bad, going = [], False
             for i, (outcome, _, lane_max_h, nsteps) in enumerate(ta.propagate_res):
                 if active(i):
                     steps[i] += nsteps
                     if math.isfinite(lane_max_h):
                         max_h[i] = max(max_h[i], abs(lane_max_h))
-                if outcome not in _GOOD:
-                    bad.append((i, outcome))
+                if outcome == hy.taylor_outcome.step_limit and _stalled_at(float(before[i]), float(ta.time[i])):
+                    bad.append((i, _stalled(float(ta.time[i]))))
+                elif outcome == hy.taylor_outcome.step_limit:
+                    going = True
+                elif outcome not in _GOOD:
+                    bad.append((i, f"heyoka stopped between t = {t_now:g} and {t_next:g} with outcome {outcome.name}"))
+            if going and not bad and progress is not None and not progress(float(np.min(ta.time)) / req.t_final):
+                raise IntegrationCancelled(f"cancelled at t = {float(np.min(ta.time)):g}")
             if not bad:
+                if going:
+                    continue
                 break
             times_hi, times_lo = (np.array(a) for a in ta.dtime)
-            for i, outcome in bad:
+            for i, reason in bad:
                 if active(i):
-                    failed[i] = IntegrationError(f"heyoka stopped between t = {t_now:g} and {t_next:g} with "
-                                                 f"outcome {outcome.name}")
+                    failed[i] = IntegrationError(reason)
                 recorder.lanes[i].capacity = 0  # from now on a dummy lane: its crossings are dropped
             healthy = [i for i in range(batch) if i not in {b for b, _ in bad}]
             if not healthy:

@@ -172,13 +172,19 @@ def chaplygin_data(lagrangian: str, coordinates: tuple[str, ...], velocities: tu
     ------
     DataError
         Naming the field: a bad name, a text that is not an expression of the declared names, L not
-        quadratic in the velocities, a₁, a₂, b or U depending on them.
+        quadratic in the velocities, a₁, a₂, b or U depending on them, a parameter none of them uses
+        (``parameters.<name>``).
     """
     if len(coordinates) != 2 or len(velocities) != 2:
         raise DataError("coordinates" if len(coordinates) != 2 else "velocities", "give exactly two names")
     symbols = declared(coordinates, velocities, parameters)
     texts = {"lagrangian": lagrangian, "a1": a1, "a2": a2, "b": b, "potential": potential or "0"}
     parsed = {field: parse_field(field, texts[field], symbols, velocities) for field in EXPRESSION_FIELDS}
+    used = set().union(*(expr.free_symbols for expr in parsed.values()))
+    for name in parameters:
+        if symbols[name] not in used:  # heyoka refuses a parameter value its system has no slot for
+            raise DataError(f"parameters.{name}", f"not used by any expression ({', '.join(EXPRESSION_FIELDS)}): "
+                                                  "remove it, or use it")
     return ChaplyginData(
         q=(symbols[coordinates[0]], symbols[coordinates[1]]), v=(symbols[velocities[0]], symbols[velocities[1]]),
         L=parsed["lagrangian"], U=parsed["potential"], a1=parsed["a1"], a2=parsed["a2"], b=parsed["b"],

@@ -28,6 +28,15 @@ class JobRecord:
     owner: str | None = None
 
 
+class QueueFull(Exception):
+    """Admitting ``messages`` more would take the queue past its bound: ``waiting`` are queued (and
+    ``pending`` are being sent by other requests)."""
+
+    def __init__(self, waiting: int, pending: int = 0) -> None:
+        super().__init__(f"{waiting} waiting, {pending} being sent")
+        self.waiting, self.pending = waiting, pending
+
+
 class InvalidCursor(ValueError):
     """A ``cursor`` that no page of ``GET /v1/jobs`` gave out."""
 
@@ -91,6 +100,12 @@ class JobBackend(Protocol):
 
     def queued_messages(self) -> int:
         """Jobs and ensemble chunks waiting to start."""
+
+    # A backend shared by several API processes (queue mode) also keeps the bounds atomically, with
+    # ``atomic_admission = True`` (see :mod:`service.admission`; others are admitted under a process lock):
+    #   submit(request, owner, max_active=n) raises store.jobs.ActiveBoundReached when the owner has n active
+    #   jobs, counted and recorded under one lock; reserve_messages(n, bound) is a context manager that
+    #   holds room for n messages in the queue while they are sent, or raises QueueFull.
 
     def health(self) -> dict[str, Any]:
         """Status of the parts this backend depends on; ``ok`` is False if jobs cannot run."""

@@ -1,20 +1,63 @@
-"""Embedded mode: jobs run in this process, in a thread pool, through the same job function as the
-Celery task (:func:`workers.jobs.run_job`). For a first run on a bare machine: no Redis, no worker."""
+"""Embedded mode: jobs run in this process, in a few threads, through the same job function as the
+Celery task (:func:`workers.jobs.run_job`). For a first run on a bare machine: no Redis, no worker.
+
+A job has the workers' time limits (``job_soft_time_limit_s``, ``job_time_limit_s``). At the soft limit
+it stops at its next progress report (every long loop reports within a fraction of a second, also
+inside heyoka's integrations), and Python code that reports none gets :class:`JobTimeout` raised in
+its thread, as Celery's signal does in a worker; the job fails naming the limit. A job still running
+at the hard limit (stuck in code that never comes back to Python) is recorded failed and its thread
+abandoned: a new thread takes its place (:class:`service.backends.job_threads.JobThreads`).
+"""
 
 from __future__ import annotations
 
+import ctypes
+import logging
 import threading
+import time
 import uuid
-from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from typing import Any
 
 from nonholonomic.integration import IntegrationCancelled
 from schemas.settings import Settings
 from service.backends.base import JobRecord, decode_cursor, encode_cursor
-from store.jobs import JobStore, StoredJob
+from service.backends.job_threads import JobThreads
 from store.ensembles import EnsembleStore
+from store.jobs import JobStore, StoredJob
 from workers.ensembles import run_ensemble_chunk
 from workers.jobs import run_job, warm_up
+from workers.limits import Deadline, JobTimeout, soft_limit_message
+
+log = logging.getLogger(__name__)
+#: Seconds between two looks of the watchdog at the running jobs' time limits.
+WATCHDOG_INTERVAL_S = 0.25
+#: Seconds :meth:`EmbeddedBackend.close` waits for the running jobs to stop.
+CLOSE_WAIT_S = 5.0
+
+
+def abandoned_message(limit_s: float) -> str:
+    """The error of a job abandoned at its hard time limit in embedded mode."""
+    return f"the job was stopped at its hard time limit of {limit_s:g} s (its thread did not return and was replaced)"
+
+
+@dataclass
+class _Running:
+    """A job running in a thread: whether it is inside ``run_job``, was interrupted or abandoned."""
+
+    job_id: str
+    thread: threading.Thread
+    started: float = field(default_factory=time.monotonic)
+    inside: bool = True
+    interrupted: bool = False
+    abandoned: bool = False
+
+
+def _raise_in(thread: threading.Thread, exc: type[BaseException] | None) -> None:
+    """Raise ``exc`` in ``thread`` when it next runs Python code (None: withdraw one not raised yet)."""
+    if thread.ident is not None:
+        ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(thread.ident),
+                                                   None if exc is None else ctypes.py_object(exc))
 
 
 class EmbeddedBackend:
@@ -34,9 +77,12 @@ class EmbeddedBackend:
         self._cancel: dict[str, threading.Event] = {}
         self._lock = threading.Lock()
         self._threads = settings.embedded_workers
-        self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="nonholonomic-job")
+        self._soft_limit_s, self._hard_limit_s = settings.job_soft_time_limit_s, settings.job_time_limit_s
+        self._running: dict[str, _Running] = {}
+        self._pool = JobThreads(self._threads, "nonholonomic-job")
         self.ensembles = EnsembleStore(self.store.engine, settings.job_ttl_s)
         self._closing = threading.Event()
+        threading.Thread(target=self._watch, daemon=True, name="nonholonomic-job-watchdog").start()
         self._warm = threading.Event()
         if settings.warm_up:  # in its own thread, so the first jobs need not wait behind it
             threading.Thread(target=self._warm_up, daemon=True, name="nonholonomic-warm-up").start()
@@ -75,20 +121,73 @@ class EmbeddedBackend:
         if stored is None or cancelled.is_set() or not self.store.start(job_id, "embedded"):
             self._forget(job_id)
             return
+        deadline = Deadline(self._soft_limit_s)
 
         def progress(fraction: float) -> bool:
             self._progress[job_id] = fraction
-            return not cancelled.is_set()
+            if cancelled.is_set():
+                return False
+            deadline.check()
+            return True
 
+        running = _Running(job_id, threading.current_thread())
+        with self._lock:
+            self._running[job_id] = running
+        end: dict[str, Any] | None = None
         try:
-            result = run_job(stored.request, progress)
+            try:
+                end = {"status": "succeeded", "result": run_job(stored.request, progress)}
+            finally:
+                self._leave(running)
         except IntegrationCancelled:
             pass
+        except JobTimeout as exc:  # at its next progress report, or raised by the watchdog
+            self._leave(running)
+            end = {"status": "failed", "error": {"type": "JobTimeout",
+                                                 "message": str(exc) or soft_limit_message(self._soft_limit_s)}}
         except Exception as exc:  # reported to the client as the job's error
-            self.store.finish(job_id, "failed", error={"type": type(exc).__name__, "message": str(exc)})
-        else:
-            self.store.finish(job_id, "succeeded", result=result)
+            end = {"status": "failed", "error": {"type": type(exc).__name__, "message": str(exc)}}
+        if end is not None and not running.abandoned:  # an abandoned job has failed already
+            self.store.finish(job_id, **end)
         self._forget(job_id)
+
+    def _leave(self, running: _Running) -> None:
+        """The job's thread has left ``run_job``: no time-limit exception may reach it any more."""
+        with self._lock:
+            if running.inside and running.interrupted:
+                _raise_in(running.thread, None)  # withdraw it if it was not raised yet
+            running.inside = False
+            self._running.pop(running.job_id, None)
+
+    def _watch(self) -> None:
+        """The watchdog: raises :class:`JobTimeout` in a job's thread at its soft limit (for Python code
+        that reports no progress), and at its hard limit records the job failed and replaces its thread."""
+        while not self._closing.wait(WATCHDOG_INTERVAL_S):
+            now = time.monotonic()
+            with self._lock:
+                late = [r for r in self._running.values() if r.inside and now - r.started >= self._soft_limit_s]
+                for running in late:
+                    if not running.interrupted:
+                        running.interrupted = True
+                        _raise_in(running.thread, JobTimeout)
+            for running in late:
+                if now - running.started >= self._hard_limit_s and not running.abandoned:
+                    self._abandon(running)
+
+    def _abandon(self, running: _Running) -> None:
+        running.abandoned = True
+        event = self._cancel.get(running.job_id)
+        if event is not None:
+            event.set()  # should it ever report progress again, it stops there
+        try:
+            self.store.finish(running.job_id, "failed", error={
+                "type": "JobTimeout", "message": abandoned_message(self._hard_limit_s)})
+        except Exception:  # the store away: the restart runs the job again
+            log.exception("could not record job %s failed at its hard time limit", running.job_id)
+        self._pool.replace(running.thread)
+        with self._lock:
+            self._running.pop(running.job_id, None)
+            self._progress.pop(running.job_id, None)
 
     def _forget(self, job_id: str) -> None:
         with self._lock:
@@ -104,7 +203,8 @@ class EmbeddedBackend:
         return ensemble_id, created_at
 
     def _enqueue_chunk(self, ensemble_id: str, chunk: int) -> None:
-        self._pool.submit(run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded", self._closing.is_set)
+        self._pool.submit(run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded", self._closing.is_set,
+                          self._soft_limit_s)
 
     def cancel_ensemble(self, ensemble_id: str) -> None:
         self.ensembles.cancel(ensemble_id)
@@ -136,7 +236,7 @@ class EmbeddedBackend:
         return self.store.active_count(owner)
 
     def queued_messages(self) -> int:
-        return self._pool._work_queue.qsize()  # jobs and chunks not started by a thread yet
+        return self._pool.pending()  # jobs and chunks not started by a thread yet
 
     def health(self) -> dict[str, Any]:
         warm = self._warm.is_set()
@@ -151,5 +251,5 @@ class EmbeddedBackend:
         self._closing.set()
         for event in list(self._cancel.values()):
             event.set()
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        self._pool.close(CLOSE_WAIT_S)
         self.store.close()

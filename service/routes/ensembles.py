@@ -6,23 +6,25 @@ from typing import Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
+from starlette.concurrency import run_in_threadpool
 
 from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView, MembersPage
-from schemas.problems import CONFLICT, FieldError
+from schemas.problems import CONFLICT
 from service.access import ensemble_of
-from service.admission import admit_work
+from service.admission import admit_ensemble
 from service.backends import JobBackend
 from service.ensembles import members_page, section_csv, section_npz, view
 from service.errors import (
     INVALID,
     UNAVAILABLE_BACKEND,
     ProblemError,
-    invalid_request,
     media_responses,
     problem_responses,
 )
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
+from service.security import content_disposition
+from service.validation import POOL_FULL, validated
 
 #: Operation ids are explicit, ``ensembles-<verb>``; a route without one gets ``ensembles-<its name>``.
 router = APIRouter(prefix="/v1/ensembles", tags=["ensembles"], generate_unique_id_function=operation_id)
@@ -42,25 +44,23 @@ def _record(request: Request, ensemble_id: str) -> dict[str, Any]:
 
 @router.post("", status_code=202, operation_id="ensembles-submit", response_model=EnsembleAccepted,
              responses=problem_responses({409: IDEMPOTENCY_IN_PROGRESS, 422: INVALID + IDEMPOTENCY_MISMATCH,
-                                          429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND}),
+                                          429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND + POOL_FULL}),
              summary="Submit an ensemble (members from a list, a level set or a parameter sweep)")
-def submit_ensemble(body: EnsembleRequest, request: Request) -> JSONResponse:
-    """Every member is validated before anything is queued; then the chunks go to the workers."""
-    problems = body.problems()
-    if problems:
-        raise invalid_request([FieldError(field=p.field, reason=p.reason) for p in problems])
-    chunks = body.chunks()
+async def submit_ensemble(body: EnsembleRequest, request: Request) -> JSONResponse:
+    """Every member is validated before anything is queued (expressions within ``validation_budget_s``, off
+    the event loop); then the chunks go to the workers."""
+    chunks = await validated(request, "ensemble", body)
+    assert chunks is not None
     spec = body.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        admit_work(request)
-        ensemble_id, _ = _backend(request).submit_ensemble(spec, chunks, request.state.owner)
+        ensemble_id = admit_ensemble(request, spec, chunks)
         location = f"/v1/ensembles/{ensemble_id}"
         accepted = EnsembleAccepted(id=ensemble_id, status="queued", location=location, members=body.members.count,
                                     chunks=len(chunks))
         return accepted.model_dump(), {"Location": location}
 
-    return idempotent(request, spec, create)
+    return await run_in_threadpool(idempotent, request, spec, create)
 
 
 @router.get("/{ensemble_id}", operation_id="ensembles-get", response_model=EnsembleView, responses=_ERRORS,
@@ -95,7 +95,7 @@ def get_section(ensemble_id: str, request: Request,
         raise ProblemError(409, "No section", "this ensemble did not ask for a poincare section", CONFLICT)
     store = _backend(request).ensembles
     filename = f"ensemble-{ensemble_id}-poincare.{format}"
-    headers = {"Content-Disposition": f'attachment; filename="{filename}"'}
+    headers = content_disposition("attachment", filename)  # the id as a safe name
     if format == "csv":
         return StreamingResponse(section_csv(store, ensemble_id, record), media_type="text/csv", headers=headers)
     return Response(section_npz(store, ensemble_id, record), media_type="application/octet-stream", headers=headers)

@@ -6,13 +6,14 @@ from typing import Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import JSONResponse, StreamingResponse
+from starlette.concurrency import run_in_threadpool
 
 from schemas.job_list import DEFAULT_LIMIT, MAX_LIMIT, STATUSES, JobList, JobListItem, job_kind
 from schemas.jobs import JobAccepted, JobRequest, JobView
 from schemas.problems import CONFLICT, NOT_FOUND, FieldError
 from schemas.results import TrajectoryExport
 from service.access import job_of
-from service.admission import admit_work
+from service.admission import admit_job
 from service.backends import JobBackend, JobRecord
 from service.backends.base import InvalidCursor
 from service.errors import (
@@ -26,6 +27,8 @@ from service.errors import (
 from service.exports import trajectory_csv, trajectory_npz
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
+from service.security import content_disposition
+from service.validation import POOL_FULL, validated
 
 #: Operation ids are explicit, ``jobs-<verb>``; a route without one gets ``jobs-<its name>``.
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], generate_unique_id_function=operation_id)
@@ -44,23 +47,21 @@ def _view(record: JobRecord) -> dict[str, Any]:
 
 @router.post("", status_code=202, operation_id="jobs-submit", response_model=JobAccepted,
              responses=problem_responses({409: IDEMPOTENCY_IN_PROGRESS, 422: INVALID + IDEMPOTENCY_MISMATCH,
-                                          429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND}),
+                                          429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND + POOL_FULL}),
              summary="Submit a simulation job")
-def submit_job(job: JobRequest, request: Request) -> JSONResponse:
-    """Validate (shape, ranges, |γ| = 1, state names) and queue; nothing is queued if invalid. With an
-    ``Idempotency-Key`` a retry answers the first response again."""
-    problems = job.problems()
-    if problems:
-        raise invalid_request([FieldError(field=p.field, reason=p.reason) for p in problems])
+async def submit_job(job: JobRequest, request: Request) -> JSONResponse:
+    """Validate (shape, ranges, |γ| = 1, state names; expressions within ``validation_budget_s``, off the
+    event loop) and queue; nothing is queued if invalid. With an ``Idempotency-Key`` a retry answers the
+    first response again."""
+    await validated(request, "job", job)
     body = job.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        admit_work(request)
-        record = _backend(request).submit(body, request.state.owner)
+        record = admit_job(request, body)
         location = f"/v1/jobs/{record.id}"
         return JobAccepted(id=record.id, status="queued", location=location).model_dump(), {"Location": location}
 
-    return idempotent(request, body, create)
+    return await run_in_threadpool(idempotent, request, body, create)
 
 
 @router.get("/{job_id}", operation_id="jobs-get", response_model=JobView, responses=_ERRORS,
@@ -84,7 +85,7 @@ def get_trajectory(job_id: str, request: Request,
                                                      "it succeeded", CONFLICT)
     if "trajectory" not in record.result:
         raise ProblemError(409, "No trajectory", f"job {job_id} is a paper report, not a simulation", CONFLICT)
-    headers = {"Content-Disposition": f'attachment; filename="job-{job_id}-trajectory.{format}"'}
+    headers = content_disposition("attachment", f"job-{job_id}-trajectory.{format}")  # the id as a safe name
     if format == "csv":
         return StreamingResponse(trajectory_csv(record.result), media_type="text/csv", headers=headers)
     if format == "npz":

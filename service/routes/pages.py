@@ -19,6 +19,7 @@ from service.ensembles import members_page, request_units, view
 from service.errors import ProblemError, media_responses, problem_responses
 from service.pages import render_ensemble, render_job, render_report, render_report_status
 from service.plots import FORMATS, PlotUnavailable, ensemble_plot, job_plot
+from service.security import content_disposition
 
 router = APIRouter()
 #: Members listed on an ensemble's page (the rest through ``/members``).
@@ -68,7 +69,7 @@ def _ensemble(request: Request, ensemble_id: str) -> dict[str, Any]:
 
 
 def _image(data: bytes, fmt: str, filename: str) -> Response:
-    return Response(data, media_type=FORMATS[fmt], headers={"Content-Disposition": f'inline; filename="{filename}"'})
+    return Response(data, media_type=FORMATS[fmt], headers=content_disposition("inline", filename))
 
 
 @router.get("/v1/jobs/{job_id}/page", tags=["jobs"], operation_id="jobs-page", response_class=HTMLResponse,

@@ -11,7 +11,7 @@ from schemas.jobs import JobAccepted
 from schemas.problems import NOT_FOUND, FieldError
 from schemas.report import REPORT_JOB, ClaimList, PaperReportRequest
 from service.access import job_of
-from service.admission import admit_work
+from service.admission import admit_job
 from service.errors import UNAVAILABLE_BACKEND, ProblemError, invalid_request, problem_responses
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
@@ -43,8 +43,7 @@ def submit_report(request: Request, body: PaperReportRequest | None = Body(None)
     spec = job.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        admit_work(request)
-        record = request.app.state.backend.submit(spec, request.state.owner)
+        record = admit_job(request, spec)
         location = f"/v1/jobs/{record.id}"
         return (JobAccepted(id=record.id, status="queued", location=location).model_dump(),
                 {"Location": location,

@@ -68,12 +68,14 @@ def _declare(names: Sequence[str], field: str) -> dict[str, sp.Symbol]:
 
 
 def _parse(text: str, symbols: dict[str, sp.Symbol], field: str, deadline: _Deadline | None = None) -> sp.Expr:
-    from nonholonomic.expressions import ExpressionError, parse_expression
+    """``text`` parsed, with a first derivative that is a function: every field is differentiated (the
+    Jacobi identity, Casimirs, Theorem 1), and sign's derivative, a Dirac delta, cannot be evaluated."""
+    from nonholonomic.expressions import ExpressionError, differentiable, parse_expression
 
     if deadline is not None:
         deadline.remaining(field)
     try:
-        return parse_expression(text, symbols)
+        return differentiable(parse_expression(text, symbols), "the checks differentiate it", order=1)
     except ExpressionError as exc:
         raise FieldProblem(field, str(exc)) from None
 

@@ -4,7 +4,11 @@ its JSON holds no NaN or infinity.
 
 Bodies start from the catalog's example of each kind, then are spoiled 0 to 3 times: a value replaced
 by an extreme number or a wrong type, scaled by up to 1e300, a key deleted or an unknown one added. Expressions come from a
-small grammar with the whitelist's functions and forbidden ones, huge literals and broken syntax.
+small grammar with the whitelist's functions and forbidden ones, huge literals and broken syntax, and the hazards
+that once gave 500s or held the API (issue 19): ``sign``, irrational exponents (``x**pi``, ``x**E``,
+``x**sqrt(2)``, ``exp(pi*log(x))``), deep powers and nesting; on every expression field: a potential U, a surface
+Phi, a Poincaré surface, a claim, a generalized Chaplygin system's L, a1, a2, b and U, a bracket's entries and
+Casimirs, Theorem 1's fields.
 
 Short here (``NONHOLONOMIC_FUZZ_EXAMPLES``, default 60 per request kind); ``bench/fuzz_api.py`` runs
 it long.
@@ -74,7 +78,8 @@ def fuzz_client():
     saved = dict(os.environ)
     os.environ.pop("REDIS_URL", None)
     os.environ.update({"NONHOLONOMIC_WARM_UP": "false", "NONHOLONOMIC_MAX_T_FINAL": "50",
-                       "NONHOLONOMIC_MAX_SAMPLES": "2001", "NONHOLONOMIC_EMBEDDED_WORKERS": "2"})
+                       "NONHOLONOMIC_MAX_SAMPLES": "2001", "NONHOLONOMIC_EMBEDDED_WORKERS": "2",
+                       "NONHOLONOMIC_VALIDATION_BUDGET_S": "2"})
     get_settings.cache_clear()
     try:
         with TestClient(create_app()) as client:
@@ -178,11 +183,23 @@ def test_fuzzed_job_requests_never_give_a_500(fuzz_client, catalog):
     assert seen.get(202, 0) >= EXAMPLES // 10 and seen.get(422, 0) >= EXAMPLES // 10, seen  # both paths exercised
 
 
+#: Pieces that gave 500s or held the API (issue 19), in names ``{a}`` and ``{b}``: sign (its derivative is a
+#: Dirac delta), irrational exponents (heyoka's translation recursed), deep powers and nesting (minutes of sympy).
+HAZARDS = ["sign({a})", "{a}**pi", "{a}**E", "{a}**sqrt(2)", "{a}**(pi/2)", "exp(pi*log({a}))", "abs({a})",
+           "({a} + {b} + 1)**64", "(({a} + 1)**8)**8", "sin(" * 12 + "{a}" + ")" * 12, "{a}**64*{b}**63"]
+
+
+def _hazards(names: list[str]) -> st.SearchStrategy[str]:
+    return st.builds(lambda template, a, b: template.format(a=a, b=b), st.sampled_from(HAZARDS),
+                     st.sampled_from(names), st.sampled_from(names))
+
+
 def _grammar(names: list[str]) -> st.SearchStrategy[str]:
-    """Expressions in ``names``: mostly smooth, now and then abs, sign, cot, a huge literal, broken syntax."""
+    """Expressions in ``names``: mostly smooth, now and then abs, sign, cot, a huge literal, broken syntax, an
+    irrational exponent or a deep power."""
     atoms = st.one_of(st.sampled_from(names * 3 + ["1", "0.5", "2", "pi", "0"]),
                       st.sampled_from(["1e308", "10**400", "M1", "__class__", "'s'", "q**pi"]),
-                      st.text(alphabet="q+-*/()^.e0123456789 ", min_size=1, max_size=8))
+                      st.text(alphabet="q+-*/()^.e0123456789 ", min_size=1, max_size=8), _hazards(names))
     functions = ["sin", "cos", "exp", "sqrt", "atan", "tanh"] * 3 + ["abs", "sign", "cot", "sec", "log", "eval"]
     return st.recursive(atoms, lambda inner: st.one_of(
         st.tuples(inner, st.sampled_from(["+", "-", "*"] * 3 + ["/", "**", "%"]), inner)
@@ -190,18 +207,41 @@ def _grammar(names: list[str]) -> st.SearchStrategy[str]:
         st.tuples(st.sampled_from(functions), inner).map(lambda t: f"{t[0]}({t[1]})")), max_leaves=6)
 
 
+def _chaplygin_body(draw: st.DrawFn) -> dict[str, Any]:
+    """The generalized Chaplygin example with one of L, a1, a2, b, U (or a parameter) spoiled."""
+    from nonholonomic.systems.generalized_chaplygin import EXAMPLE_JOB
+
+    body = json.loads(json.dumps(EXAMPLE_JOB))
+    body.update(t_final=draw(st.floats(0.01, 2.0)), samples=draw(st.integers(2, 20)), checks=["integrals"])
+    system = body["system"]
+    names = system["coordinates"] + system["velocities"] + list(system["parameters"])
+    field = draw(st.sampled_from(["lagrangian", "a1", "a2", "b", "potential", "parameters"]))
+    if field == "parameters":
+        system["parameters"][draw(st.sampled_from(["k", "I1"]))] = draw(NUMBERS)
+    else:
+        system[field] = draw(_grammar(names))
+    return body
+
+
 @st.composite
 def user_potential_bodies(draw: st.DrawFn, systems: list[dict[str, Any]]) -> dict[str, Any]:
-    """A catalog example with a potential of the user's own (and now and then a claim), short."""
+    """A catalog example with a potential of the user's own (and now and then a claim, a Poincaré surface or a
+    surface Phi of the user's), or a generalized Chaplygin system; short."""
+    if draw(st.integers(0, 5)) == 0:
+        return _chaplygin_body(draw)
     entry = draw(st.sampled_from(systems))
     body = json.loads(json.dumps(entry["example"]))
     body.update(t_final=draw(st.floats(0.01, 2.0)), samples=draw(st.integers(2, 20)), checks=["integrals"])
     names = entry["potential_expression"]["variables"] + ["q"]
     parameters = draw(st.sampled_from([{"q": draw(st.floats(-2, 2))}] * 4 + [{"q": draw(NUMBERS)}, {}, {"D": 1.0}]))
     body["system"]["potential"] = {"kind": "expression", "U": draw(_grammar(names)), "parameters": parameters}
+    components = [c for v in entry["state"] for c in v["components"]]
     if draw(st.booleans()):
-        components = [c for v in entry["state"] for c in v["components"]]
         body["claims"] = [{"name": "claim", "expression": draw(_grammar(components))}]
+    if draw(st.integers(0, 3)) == 0:
+        body["poincare"] = {"surface": draw(_grammar(components)), "max_points": 5}
+    if "surface" in body["system"] and draw(st.booleans()):
+        body["system"]["surface"] = {"Phi": draw(_grammar(["x1", "x2", "x3", "c0"])), "parameters": {"c0": 1.0}}
     return body
 
 
@@ -222,7 +262,7 @@ NAMES = ["x", "y", "z", "a", "b"]
 ATOMS = st.one_of(st.sampled_from(NAMES * 3 + ["1", "2.5", "-3", "pi", "0"] * 2),
                   st.sampled_from(["E", "1e308", "10**400", "1e-400", "I", "x_1", "__class__", "lambda: 0", "[]",
                                    "'s'", "1j"]),
-                  st.text(alphabet="xyzab+-*/()^.,e0123456789 _", min_size=1, max_size=12))
+                  st.text(alphabet="xyzab+-*/()^.,e0123456789 _", min_size=1, max_size=12), _hazards(NAMES))
 FUNCTIONS = ["sin", "cos", "tan", "exp", "log", "sqrt", "atan", "sinh"] * 3 + ["abs", "sign", "eval", "__import__",
                                                                             "open", "Abs"]
 EXPRESSIONS = st.recursive(
@@ -255,7 +295,7 @@ IN_COORDINATES = st.one_of(st.recursive(
     lambda inner: st.one_of(st.tuples(inner, st.sampled_from(["+", "-", "*"]), inner).map(lambda t: f"({t[0]}){t[1]}({t[2]})"),
                             st.tuples(st.sampled_from(["sin", "cos"]), inner).map(lambda t: f"{t[0]}({t[1]})")),
     max_leaves=4), st.sampled_from(["x", "y", "1", "2", "0.5", "0"]), st.sampled_from(["x", "y", "1", "2", "0.5", "0"]),
-    EXPRESSIONS)
+    EXPRESSIONS, _hazards(["x", "y"]))
 
 
 @st.composite
@@ -269,6 +309,9 @@ def hamiltonize_bodies(draw: st.DrawFn) -> dict[str, Any]:
         body["potential"] = draw(IN_COORDINATES)
     if draw(st.integers(0, 4)) == 0:
         body["monopole"] = {"domain": [[draw(EXPRESSIONS), draw(EXPRESSIONS)], ["0", "2*pi"]]}
+        if draw(st.booleans()):
+            shift = st.sampled_from(["N*cos(x)", "0"]) | IN_COORDINATES
+            body["monopole"]["shift"] = [draw(IN_COORDINATES), draw(shift)]
     return body
 
 

@@ -20,9 +20,9 @@ from fastapi.testclient import TestClient
 
 from nonholonomic.systems import SYSTEMS
 from schemas.jobs import JobRequest as ServerJobRequest
-from schemas.settings import get_settings
+from schemas.settings import Settings, get_settings
 from service.main import create_app
-from service.openapi import OPERATION_ID, operation_id
+from service.openapi import OPERATION_ID, SETTING_LIMITS, operation_id
 
 PROBLEM_REF = "#/components/schemas/Problem"
 #: Package name of the generated client (a directory on sys.path for this module only).
@@ -124,6 +124,45 @@ def test_declared_statuses_are_the_real_ones(spec):
     assert "422" in paths["/v1/jobs"]["post"]["responses"] and "404" not in paths["/v1/jobs"]["post"]["responses"]
     assert "422" not in paths["/v1/jobs/{job_id}"]["get"]["responses"]  # a plain string id cannot be invalid
     assert "408" in paths["/v1/hamiltonize"]["post"]["responses"]
+
+
+def test_every_body_may_be_too_large(spec):
+    """The body limit's 413 (problem+json) is declared wherever a body is read, and only there."""
+    for method, path, op in _operations(spec):
+        declared = op["responses"].get("413")
+        if "requestBody" in op:
+            assert declared is not None, (method, path)
+            assert declared["content"]["application/problem+json"]["schema"] == {"$ref": PROBLEM_REF}
+        else:
+            assert declared is None, (method, path)
+
+
+def test_the_document_states_the_deployments_limits(monkeypatch):
+    """Each limit of the settings is the ``maximum`` (or ``maxItems``) of the request fields it bounds,
+    and the app holds to it: at the limit accepted, above it a 422 naming the field."""
+    monkeypatch.delenv("REDIS_URL", raising=False)
+    monkeypatch.delenv("NONHOLONOMIC_REDIS_URL", raising=False)
+    monkeypatch.setenv("NONHOLONOMIC_WARM_UP", "false")
+    limits = {"max_t_final": 50.0, "max_samples": 300, "max_section_points": 40, "max_ensemble_members": 7}
+    for name, value in limits.items():
+        monkeypatch.setenv(f"NONHOLONOMIC_{name.upper()}", str(value))
+    get_settings.cache_clear()
+    try:
+        with TestClient(create_app(Settings(**limits))) as c:
+            schemas = c.get("/openapi.json").json()["components"]["schemas"]
+            for (schema, prop), (setting, keyword) in SETTING_LIMITS.items():
+                field = schemas[schema]["properties"][prop]
+                branches = [b for b in field.get("anyOf", []) if b.get("type") != "null"] or [field]
+                assert [b[keyword] for b in branches] == [limits[setting]], (schema, prop, field)
+            body = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+                    "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 50.0,
+                    "samples": 300}
+            assert c.post("/v1/jobs", json=body).status_code == 202
+            for field, above in (("t_final", 50.5), ("samples", 301)):
+                r = c.post("/v1/jobs", json={**body, field: above})
+                assert r.status_code == 422 and [e["field"] for e in r.json()["errors"]] == [field], r.text
+    finally:
+        get_settings.cache_clear()
 
 
 def test_binary_and_text_answers_declare_their_media_types(spec):

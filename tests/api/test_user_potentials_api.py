@@ -52,7 +52,7 @@ def _problem(client, potential, **state):
 def test_a_bad_users_potential_is_a_422_naming_the_field(client):
     errors = _problem(client, {**USER, "U": "q*gamma3**2 + r*M1"})
     assert "unknown name 'M1'" in errors["system.potential.U"] and "character 16" in errors["system.potential.U"]
-    errors = _problem(client, {**USER, "parameters": {"q": 1.0, "D": 2.0}})
+    errors = _problem(client, {**USER, "parameters": {"q": 1.0, "r": 1.0, "D": 2.0}})  # D: the ball's own name
     assert "D: already a name of chaplygin_ball" in errors["system.potential.parameters"]
     errors = _problem(client, {**USER, "U": "q*abs(gamma1)"})
     assert "abs() is not smooth" in errors["system.potential.U"]

@@ -1,7 +1,9 @@
 """The pages in a real headless Chromium (Debian's, driven by Playwright): the job page, the ensemble
-page, the paper report and /docs render their expected elements, every image and script loads from
-the service itself, and the browser logs no error. A screenshot of each goes to
-``$NONHOLONOMIC_TEST_OUTPUT/browser/`` (``test-output/`` under ``scripts/test.py``)."""
+page, the paper report, /docs and /redoc render their expected elements, every image and script loads
+from the service itself, and the browser logs no error. Each page comes with its Content-Security-Policy
+(:mod:`service.security`) and the browser reports no violation of it (``securitypolicyviolation``
+events and console errors). A screenshot of each goes to ``$NONHOLONOMIC_TEST_OUTPUT/browser/``
+(``test-output/`` under ``scripts/test.py``)."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ from urllib.parse import urlparse
 import httpx
 import pytest
 
+from service.security import DOCS_POLICY, PAGE_POLICY, SVG_POLICY
 from tests.support import ROOT, free_port, poll_job, start_api, stop, wait_healthy
 
 pytestmark = pytest.mark.integration
@@ -29,6 +32,15 @@ ENSEMBLE = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D"
             "t_final": 200.0, "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "gamma2"]},
             "lyapunov": {"count": 1}}
 REPORT_CLAIMS = ["veselova.multiplier", "ball.measure", "ball.theorem_3"]
+#: Runs in every page before its own content: each CSP violation is kept and logged as an error.
+CSP_LISTENER = """
+window.__cspViolations = [];
+document.addEventListener('securitypolicyviolation', e => {
+  const what = `CSP violation: ${e.violatedDirective} blocked ${e.blockedURI || 'inline'} (${e.sourceFile}:${e.lineNumber})`;
+  window.__cspViolations.push(what);
+  console.error(what);
+});
+"""
 
 
 @pytest.fixture(scope="module")
@@ -64,25 +76,34 @@ def browser():
 class Visit:
     """One page load: console errors, failed requests and every host asked."""
 
-    def __init__(self, browser, url: str) -> None:
+    def __init__(self, browser, url: str, policy: str = PAGE_POLICY) -> None:
         self.errors: list[str] = []
         self.hosts: set[str] = set()
         self.page = browser.new_page(viewport={"width": 1400, "height": 1000})
+        self.page.add_init_script(CSP_LISTENER)
         self.page.on("console", lambda m: self.errors.append(f"console: {m.text}") if m.type == "error" else None)
         self.page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
         self.page.on("requestfailed", lambda r: self.errors.append(f"request failed: {r.url} {r.failure}"))
-        self.page.on("request", lambda r: self.hosts.add(urlparse(r.url).netloc))
+        self.page.on("request", lambda r: self.hosts.add(urlparse(r.url).netloc)
+                     if urlparse(r.url).scheme in ("http", "https") else None)  # not data: or blob:
         self.page.on("response", lambda r: self.errors.append(f"{r.status} for {r.url}") if r.status >= 400 else None)
         response = self.page.goto(url, wait_until="networkidle", timeout=60_000)
         assert response is not None and response.status == 200, url
+        headers = response.headers
+        assert headers.get("content-security-policy", "").startswith(policy.split("{")[0]), headers
+        assert headers.get("x-content-type-options") == "nosniff" and headers.get("x-frame-options") == "DENY"
+        assert headers.get("referrer-policy") == "no-referrer"
 
     def images_loaded(self) -> list[tuple[str, int]]:
         return self.page.eval_on_selector_all("img", "els => els.map(e => [e.getAttribute('src'), e.naturalWidth])")
 
-    def finish(self, name: str, base: str) -> None:
+    def finish(self, name: str, base: str, screenshot: bool = True) -> None:
         OUTPUT.mkdir(parents=True, exist_ok=True)
-        self.page.screenshot(path=str(OUTPUT / f"{name}.png"), full_page=True)
+        if screenshot:  # (Chromium takes none of a bare SVG document)
+            self.page.screenshot(path=str(OUTPUT / f"{name}.png"), full_page=True)
+        violations = self.page.evaluate("window.__cspViolations")
         self.page.close()
+        assert violations == [], violations
         assert not self.errors, self.errors
         assert self.hosts <= {urlparse(base).netloc}, f"asked hosts other than the service: {self.hosts}"
 
@@ -122,7 +143,14 @@ def test_job_page_shows_system_evidence_plots_and_exports(api, browser):
     hrefs = page.eval_on_selector_all("#links a", "els => els.map(e => e.getAttribute('href'))")
     assert f"{location}/trajectory?format=csv" in hrefs and f"{location}/trajectory?format=npz" in hrefs
     assert page.locator("meta[http-equiv=refresh]").count() == 0  # finished: no reload
+    # the stylesheet (served by the service, no inline style) applies, column widths included
+    assert page.eval_on_selector("#integrals", "e => getComputedStyle(e).borderCollapse") == "collapse"
+    assert page.eval_on_selector("#checks col", "e => getComputedStyle(e).width") != "auto"
     visit.finish("job", api)
+    # a plot's SVG opened on its own draws under its own policy
+    svg = Visit(browser, f"{api}{location}/plots/trajectory.svg", SVG_POLICY)
+    assert svg.page.locator("svg path").count() > 0
+    svg.finish("job-trajectory-svg", api, screenshot=False)
 
 
 def test_ensemble_page_shows_summary_members_and_plots(api, browser):
@@ -161,10 +189,31 @@ def test_report_page_shows_every_claim_with_its_verdict(api, browser):
 def test_docs_render_offline_with_every_operation(api, browser):
     spec = httpx.get(f"{api}/openapi.json").json()
     operations = sum(1 for methods in spec["paths"].values() for m in methods if m in ("get", "post", "delete"))
-    visit = Visit(browser, f"{api}/docs")
+    visit = Visit(browser, f"{api}/docs", DOCS_POLICY)
     page = visit.page
     page.wait_for_selector(".swagger-ui .info .title", timeout=30_000)
     assert "nonholonomic" in page.locator(".swagger-ui .info .title").inner_text()
     page.wait_for_selector(".opblock", timeout=30_000)
     assert page.locator(".opblock").count() == operations
     visit.finish("docs", api)
+
+
+#: ReDoc's bundle always asks the internet for the "API docs by Redocly" logo; the policy refuses it
+#: (the docs are offline), and the image hides itself. The one violation /redoc may report.
+REDOC_LOGO = "https://cdn.redoc.ly/redoc/logo-mini.svg"
+
+
+def test_redoc_renders_offline_under_its_policy(api, browser):
+    visit = Visit(browser, f"{api}/redoc", DOCS_POLICY)
+    page = visit.page
+    page.wait_for_selector(".api-info h1", timeout=60_000)
+    assert "nonholonomic" in page.locator(".api-info h1").inner_text()
+    assert page.locator("[data-section-id]").count() > 10  # the operations are drawn
+    violations = page.evaluate("window.__cspViolations")
+    assert violations and all(f"img-src blocked {REDOC_LOGO}" in v for v in violations), violations
+    page.evaluate("window.__cspViolations = []")
+    refused = [e for e in visit.errors if REDOC_LOGO in e]
+    assert any(e.startswith("request failed:") and e.endswith(" csp") for e in refused), visit.errors
+    visit.errors = [e for e in visit.errors if e not in refused]
+    visit.hosts.discard("cdn.redoc.ly")  # asked, refused by the policy before any connection
+    visit.finish("redoc", api)

@@ -40,11 +40,12 @@ def test_a_chunk_run_twice_is_counted_once_with_its_results(store):
     store.mark_started("e", 1)
     store.set_progress("e", 1, 2)
     assert store.record("e")["progress"] == {1: 2}
-    for run in range(2):  # redelivered: the same numbers again
+    for run in range(2):  # redelivered: the first run to finish is kept, the late one changes nothing
         store.mark_started("e", 0)
-        store.store_chunk("e", 0, _members(0, 3, 0.25), [{"d": 0.5}] * 3, f"worker-{run}")
+        stored = store.store_chunk("e", 0, _members(0, 3, 0.25), [{"d": 0.5}] * 3, f"worker-{run}")
+        assert stored is (run == 0)
     record = store.record("e")
-    assert record["done"] == {0} and record["starts"] == {0: 2, 1: 1} and record["workers"] == {0: "worker-1"}
+    assert record["done"] == {0} and record["starts"] == {0: 2, 1: 1} and record["workers"] == {0: "worker-0"}
     assert record["digests"] == {0: [{"d": 0.5}] * 3}
     assert store.chunk_members("e", 0) == _members(0, 3, 0.25)  # floats bit for bit, 1e-300 included
     assert store.chunk_members("e", 1) is None and store.chunk_done("e", 0) and not store.chunk_done("e", 1)

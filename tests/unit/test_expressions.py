@@ -27,10 +27,11 @@ from nonholonomic.expressions import (
 NAMES = ["I1", "I2", "I3", "theta", "phi", "thetadot", "phidot", "x", "y", "z", "e", "E1", "E2"]
 S = declare_symbols(NAMES)
 I1, I2, I3, theta, phi, thetadot, phidot, x, y, z, e_var, E1, E2 = (S[n] for n in NAMES)
-#: Every refusal (measured: < 1 ms each) and fuzzed parse must finish within this many seconds.
-FAST_S = 1.0
-#: The slowest accepted 2000-character inputs (measured cold: 0.21-0.56 s on 2 cores).
-WORST_S = 2.0
+#: Hang guards, not results (speed is measured in bench/): every refusal (measured: < 1 ms each) and
+#: fuzzed parse finishes within this many seconds, even on a loaded machine.
+FAST_S = 5.0
+#: The slowest accepted 2000-character inputs (measured cold: 0.21-0.56 s on 2 quiet cores, 2.8 s at load 16).
+WORST_S = 15.0
 
 
 def parse(text: str, **kw) -> sp.Expr:
@@ -378,7 +379,7 @@ def test_error_is_picklable_value_error():
 def test_module_uses_no_eval():
     """Identifiers in the module's code (comments and strings stripped): no eval/exec/compile/
     sympify/parse_expr/S()/__import__, and ``parse`` only as ``ast.parse``."""
-    source = Path(ex.__file__).read_text()
+    source = "\n".join(path.read_text() for path in sorted(Path(ex.__file__).parent.glob("*.py")))  # the package
     tokens = [t for t in tokenize.generate_tokens(io.StringIO(source).readline)
               if t.type not in (tokenize.COMMENT, tokenize.STRING)]
     names = [t.string for t in tokens if t.type == tokenize.NAME]

@@ -1,0 +1,69 @@
+"""The worker's soft time limit acts inside heyoka's loops (issue 19, item 13), with a real Celery worker.
+
+Celery's soft limit is a signal whose Python handler runs only when control comes back to Python: a
+job inside one long heyoka propagation (here a Lyapunov spectrum whose one QR interval is the whole
+run) ran on to the hard limit and was killed. The job's progress callback now checks the soft limit
+between the pieces of every long loop: the job ends at its soft limit, with the soft limit's message.
+
+Needs Redis on 127.0.0.1:6379 and PostgreSQL (the README's test command starts them).
+"""
+
+from __future__ import annotations
+
+import uuid
+
+import httpx
+import pytest
+
+from tests.support import (
+    TEST_REDIS_URL,
+    free_port,
+    poll_job,
+    redis_available,
+    start_api,
+    start_worker,
+    stop,
+    wait_healthy,
+)
+
+pytestmark = pytest.mark.integration
+
+BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+        "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 11}
+#: The trajectory takes a few seconds, the spectrum's one propagation several times longer.
+ONE_LONG_PROPAGATION = {**BODY, "t_final": 3e5, "lyapunov": {"interval": 3e5}}
+#: Soft limit past the trajectory's phase on a busy machine, hard limit before the spectrum ends.
+SOFT_S, HARD_S = 15, 22
+LIMITS = {"NONHOLONOMIC_JOB_SOFT_TIME_LIMIT_S": str(SOFT_S), "NONHOLONOMIC_JOB_TIME_LIMIT_S": str(HARD_S),
+          "NONHOLONOMIC_MAX_T_FINAL": "1e9"}
+
+
+def test_the_soft_time_limit_ends_a_job_inside_a_long_heyoka_call(tmp_path):
+    if not redis_available():
+        pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
+    queue = f"soft-{uuid.uuid4().hex[:8]}"
+    port = free_port()
+    env = {"REDIS_URL": TEST_REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS}
+    api = start_api(port, tmp_path / "api.log", env)
+    worker = start_worker(TEST_REDIS_URL, queue, tmp_path / "worker.log", extra_env=LIMITS)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        with httpx.Client(base_url=base, timeout=10) as client:
+            wait_healthy(base, timeout=180)
+            # compiles the variational equations first (LLVM, outside Python either way)
+            warm = {**BODY, "lyapunov": {"interval": 1.0}}
+            assert poll_job(client, client.post("/v1/jobs", json=warm).headers["location"], timeout=180)["status"] \
+                == "succeeded"
+            location = client.post("/v1/jobs", json=ONE_LONG_PROPAGATION).headers["location"]
+            view = poll_job(client, location, timeout=HARD_S * 5)
+            assert view["status"] == "failed"
+            assert view["error"] == {"type": "JobTimeout", "message": f"the job exceeded its time limit of {SOFT_S} s"}
+            short = poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"], timeout=60)
+            assert short["status"] == "succeeded"  # the same pool process goes on
+    except Exception:
+        for log in ("api.log", "worker.log"):
+            print(f"--- {log}\n{(tmp_path / log).read_text()[-3000:]}")
+        raise
+    finally:
+        stop(worker)
+        stop(api)
