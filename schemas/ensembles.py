@@ -101,11 +101,15 @@ class EnsembleRequest(BaseModel):
     def definition(self) -> MechanicalSystem:
         return self.system.definition()  # type: ignore[attr-defined]
 
-    def effective_chunk_size(self) -> int:
-        system = self.definition()
-        return self.chunk_size or default_chunk_size(
-            system, self.t_final, poincare=self.poincare.options() if self.poincare else None,
-            lyapunov=self.lyapunov.options() if self.lyapunov else None)
+    def effective_chunk_size(self, system: MechanicalSystem | None = None) -> int:
+        """``chunk_size``, else about a second of work per chunk, larger when that would make more than
+        ``max_ensemble_chunks`` chunks (each is a message the POST sends)."""
+        if self.chunk_size:
+            return self.chunk_size
+        size = default_chunk_size(system or self.definition(), self.t_final,
+                                  poincare=self.poincare.options() if self.poincare else None,
+                                  lyapunov=self.lyapunov.options() if self.lyapunov else None)
+        return max(size, -(-self.members.count // get_settings().max_ensemble_chunks))
 
     def chunks(self) -> list[tuple[int, int]]:
         """``(start, stop)`` of every chunk."""
@@ -149,10 +153,13 @@ class EnsembleRequest(BaseModel):
         before its members are validated or anything is sent (issue 19, item 5)."""
         if count < 1:
             return []
-        size = self.chunk_size or default_chunk_size(
-            system, self.t_final, poincare=self.poincare.options() if self.poincare else None,
-            lyapunov=self.lyapunov.options() if self.lyapunov else None)
+        size = self.effective_chunk_size(system)
         chunks = -(-count // size)
+        most = get_settings().max_ensemble_chunks
+        if self.chunk_size and chunks > most:  # each chunk is a message the POST sends: a bound on its cost
+            return [FieldProblem("chunk_size", f"{count} members in chunks of {size} make {chunks} chunks, more than "
+                                               f"one ensemble may have (max_ensemble_chunks={most}); use chunk_size "
+                                               f">= {-(-count // most)}, or leave it out")]
         if chunks <= max_queued:
             return []
         field = "chunk_size" if self.chunk_size else "members"

@@ -38,6 +38,9 @@ class Settings(BaseSettings):
                                      description="largest members x samples of one ensemble (what its results hold)")
     max_ensemble_section_points: int = Field(10_000_000, ge=1,
                                              description="largest members x poincare.max_points of one ensemble")
+    max_ensemble_chunks: int = Field(1000, ge=1, description="most chunks (queue messages) of one ensemble: its POST sends "
+                                                            "them all (~1 ms of API CPU each); by default chunks grow "
+                                                            "to fit")
     job_soft_time_limit_s: float = Field(600.0, gt=0)
     job_time_limit_s: float = Field(660.0, gt=0)
     visibility_timeout_s: float = Field(3600.0, gt=0, description="broker redelivery timeout (> time limits)")

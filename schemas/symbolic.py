@@ -8,12 +8,13 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, model_validator
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE
 
 #: A named constant's value (as a system parameter's: beyond, the pointwise checks overflow).
-Constant = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE, le=MAX_PARAMETER_MAGNITUDE)]
+Constant = Annotated[float, Strict(), Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE,
+                                            le=MAX_PARAMETER_MAGNITUDE)]
 
 Expression = Annotated[str, Field(min_length=1, max_length=2000, description="expression, e.g. 'x*y - z'")]
 Name = Annotated[str, Field(min_length=1, max_length=32)]

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationInfo, create_model, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, ValidationInfo, create_model, field_validator
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
 from nonholonomic.expressions import ExpressionError, check_expression, declare_symbols
@@ -21,7 +21,7 @@ from nonholonomic.systems import generalized_chaplygin as gc
 from nonholonomic.systems.ball_on_surface import SURFACE_VARIABLES, Surface, surface
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE as GENERALIZED_CHAPLYGIN_EXAMPLE
 
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Strict(), Field(allow_inf_nan=False)]
 #: ``step(fields)``: the validation is about to read these fields (a budget overrun names them).
 Step = Callable[[Sequence[str]], None]
 
@@ -32,7 +32,7 @@ def no_step(fields: Sequence[str]) -> None:
 
 #: Admissible state components (initial states, vectors): beyond, the equations' products overflow.
 MAX_STATE_MAGNITUDE = 1e12
-StateFloat = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_STATE_MAGNITUDE, le=MAX_STATE_MAGNITUDE)]
+StateFloat = Annotated[float, Strict(), Field(allow_inf_nan=False, ge=-MAX_STATE_MAGNITUDE, le=MAX_STATE_MAGNITUDE)]
 Vec3 = Annotated[list[StateFloat], Field(min_length=3, max_length=3)]
 #: A state vector of an initial state: 3 components, 2 for a generalized Chaplygin system's q and qdot.
 StateVec = Annotated[list[StateFloat], Field(min_length=2, max_length=3)]
@@ -64,7 +64,7 @@ def _parameter_field(par: Parameter) -> tuple[Any, Any]:
     if par.minimum is not None:
         bounds.pop("ge")
         bounds["gt" if par.strict else "ge"] = par.minimum
-    number = Annotated[float, Field(allow_inf_nan=False, **bounds)]
+    number = Annotated[float, Strict(), Field(allow_inf_nan=False, **bounds)]
     if par.strict and par.minimum == 0:  # the core's smallest positive value, checked per component
         number = Annotated[number, AfterValidator(_at_least_min_positive)]
     annotation: Any = number
@@ -88,7 +88,8 @@ class PotentialSpec(BaseModel):
         return self.kind  # type: ignore[attr-defined,no-any-return]
 
 
-ParameterFloat = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE, le=MAX_PARAMETER_MAGNITUDE)]
+ParameterFloat = Annotated[float, Strict(), Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE,
+                                                  le=MAX_PARAMETER_MAGNITUDE)]
 
 
 class ExpressionPotentialSpec(PotentialSpec):

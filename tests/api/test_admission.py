@@ -87,6 +87,20 @@ def test_an_ensemble_whose_chunks_alone_exceed_the_bound_is_a_cheap_422(app_with
     assert client.get("/v1/jobs").json()["items"] == []
 
 
+def test_an_ensemble_has_at_most_max_ensemble_chunks_chunks(app_with):
+    """Each chunk is a message its POST sends: explicit chunks beyond the bound are a 422 naming
+    chunk_size with the least size that fits; default chunks grow to fit it."""
+    client = app_with(MAX_ENSEMBLE_CHUNKS="4", MAX_ENSEMBLE_MEMBERS="100000", MAX_ENSEMBLE_VALUES="1000000")
+    r = client.post("/v1/ensembles", json=ensemble(10, chunk_size=2))
+    assert r.status_code == 422, r.text
+    (error,) = r.json()["errors"]
+    assert error["field"] == "chunk_size" and "5 chunks" in error["reason"] and "chunk_size >= 3" in error["reason"]
+    fits = client.post("/v1/ensembles", json=ensemble(10, chunk_size=3))
+    assert fits.status_code == 202 and fits.json()["chunks"] == 4, fits.text
+    grown = client.post("/v1/ensembles", json=ensemble(4000, chunk_size=None, sample=True))
+    assert grown.status_code == 202 and grown.json()["chunks"] <= 4, grown.text
+
+
 def test_failed_authentication_is_rate_limited_per_address(app_with):
     client = app_with(API_KEYS="alice:alpha-secret", AUTH_FAILURES_PER_MINUTE="3")
     wrong = {"X-API-Key": "guess"}
@@ -102,45 +116,15 @@ def test_failed_authentication_is_rate_limited_per_address(app_with):
     assert other.get("/v1/systems", headers=wrong).status_code == 401
 
 
-def test_an_unknown_and_a_foreign_job_id_answer_alike_after_the_same_work(app_with):
-    client = app_with(API_KEYS="alice:alpha-secret,bob:beta-secret")
-    location = client.post("/v1/jobs", json=job(samples=2001), headers=A).headers["location"]
+def _finished(client: TestClient, location: str) -> None:
+    """Wait for the work at ``location`` (alice's): no writes in the background while counting."""
     deadline = time.monotonic() + 120
     while client.get(location, headers=A).json()["status"] != "succeeded" and time.monotonic() < deadline:
         time.sleep(0.05)
-    foreign, unknown = location, f"/v1/jobs/{'0' * 8}-0000-4000-8000-{'0' * 12}"
-    statements: list[str] = []
-    engine = client.app.state.backend.store.engine
-
-    def record(conn, cursor, statement, parameters, context, executemany) -> None:
-        statements.append(statement)
-
-    event.listen(engine, "before_cursor_execute", record)
-    try:
-        answers = {}
-        work = {}
-        for name, path in (("foreign", foreign), ("unknown", unknown)):
-            statements.clear()
-            answers[name] = client.get(path, headers=B)
-            work[name] = list(statements)
-    finally:
-        event.remove(engine, "before_cursor_execute", record)
-    assert answers["foreign"].status_code == answers["unknown"].status_code == 404
-    foreign_text = answers["foreign"].text.replace(foreign.rsplit("/", 1)[1], "ID")
-    assert foreign_text == answers["unknown"].text.replace(unknown.rsplit("/", 1)[1], "ID")  # the same body
-    assert answers["foreign"].headers["content-type"] == answers["unknown"].headers["content-type"]
-    assert work["foreign"] == work["unknown"] and len(work["foreign"]) == 1  # one lookup ...
-    assert "result" not in work["foreign"][0]  # ... that never reads another key's result
-    assert client.get(foreign, headers=A).json()["result"] is not None
 
 
-def test_an_unknown_and_a_foreign_ensemble_id_answer_alike_after_the_same_work(app_with):
-    client = app_with(API_KEYS="alice:alpha-secret,bob:beta-secret")
-    foreign = client.post("/v1/ensembles", json=ensemble(2), headers=A).headers["location"]
-    deadline = time.monotonic() + 120  # finished: no chunk writes in the background while counting
-    while client.get(foreign, headers=A).json()["status"] != "succeeded" and time.monotonic() < deadline:
-        time.sleep(0.05)
-    unknown = f"/v1/ensembles/{'0' * 8}-0000-4000-8000-{'0' * 12}"
+def _asked_by_bob(client: TestClient, foreign: str, unknown: str) -> tuple[dict, dict]:
+    """Bob's answers for alice's ``foreign`` path and an ``unknown`` one, and the SQL each cost."""
     statements: list[str] = []
     engine = client.app.state.backend.store.engine
 
@@ -159,6 +143,25 @@ def test_an_unknown_and_a_foreign_ensemble_id_answer_alike_after_the_same_work(a
     assert answers["foreign"].status_code == answers["unknown"].status_code == 404
     assert (answers["foreign"].text.replace(foreign.rsplit("/", 1)[1], "ID")
             == answers["unknown"].text.replace(unknown.rsplit("/", 1)[1], "ID"))  # the same body
+    assert answers["foreign"].headers["content-type"] == answers["unknown"].headers["content-type"]
+    return answers, work
+
+
+def test_an_unknown_and_a_foreign_job_id_answer_alike_after_the_same_work(app_with):
+    client = app_with(API_KEYS="alice:alpha-secret,bob:beta-secret")
+    foreign = client.post("/v1/jobs", json=job(samples=2001), headers=A).headers["location"]
+    _finished(client, foreign)
+    _, work = _asked_by_bob(client, foreign, f"/v1/jobs/{'0' * 8}-0000-4000-8000-{'0' * 12}")
+    assert work["foreign"] == work["unknown"] and len(work["foreign"]) == 1  # one lookup ...
+    assert "result" not in work["foreign"][0]  # ... that never reads another key's result
+    assert client.get(foreign, headers=A).json()["result"] is not None
+
+
+def test_an_unknown_and_a_foreign_ensemble_id_answer_alike_after_the_same_work(app_with):
+    client = app_with(API_KEYS="alice:alpha-secret,bob:beta-secret")
+    foreign = client.post("/v1/ensembles", json=ensemble(2), headers=A).headers["location"]
+    _finished(client, foreign)
+    _, work = _asked_by_bob(client, foreign, f"/v1/ensembles/{'0' * 8}-0000-4000-8000-{'0' * 12}")
     assert work["foreign"] == work["unknown"] and len(work["foreign"]) == 1  # one lookup, never the chunks
     assert "ensemble_chunks" not in work["foreign"][0]
     assert client.get(foreign, headers=A).status_code == 200

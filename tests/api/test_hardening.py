@@ -158,3 +158,18 @@ def test_parsing_counts_against_the_budget(client):
     r = client.post("/v1/brackets/verify", json={**SO3, "budget_s": 1e-6})
     assert r.status_code == 422 and _fields(r) == ["budget_s"], r.text
     assert "stopped at matrix[0][0]" in r.json()["detail"]
+
+
+@pytest.mark.parametrize("overrides,field", [
+    ({"t_final": "20"}, "t_final"),
+    ({"system": {**BALL, "D": "0.7"}}, "system.D"),
+    ({"system": {**BALL, "inertia": [2.0, "3", 4.5]}}, "system.inertia[1]"),
+    ({"initial_state": {"M": [0.5, "-0.2", 0.1], "gamma": [0.0, 0.6, 0.8]}}, "initial_state.M[1]"),
+    ({"initial_state": {"M": [True, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}}, "initial_state.M[0]"),
+])
+def test_numbers_sent_as_strings_or_booleans_are_refused_not_coerced(client, overrides, field):
+    """A number is a JSON number (an integer is one too): "0.7" or true is a 422 naming the field, as
+    the OpenAPI document's ``type: number`` says (issue 19, item 13)."""
+    r = client.post("/v1/jobs", json=job(**overrides))
+    assert r.status_code == 422 and field in _fields(r), r.text
+    assert client.post("/v1/jobs", json=job(t_final=20, system={**BALL, "D": 1})).status_code == 202  # integers
