@@ -34,29 +34,52 @@ The τ of a crossing is the integrated reduced time ``dτ = ρ dt`` (paper eq. 2
 Measures reported per section: the largest ``|S(x) − value|`` at the points relative to the
 surface's scale (:func:`surface_scale_of`), and the largest relative drift of every first integral
 at the points against the initial state, normalised as in :mod:`nonholonomic.evidence.integrals`.
+
+Layout: this module is the front door (:func:`section`, :func:`section_batch`: the segment loop,
+scalar and batch, with its segment lengths and stall checks); every name below is importable from here.
+
+* :mod:`.poincare_surface`: parsing a surface (:func:`parse_surface`, :class:`SurfaceError`), its
+  names and its numpy kernels, :func:`surface_scale_of`;
+* :mod:`.poincare_request`: the checks of a request's fields (:data:`DIRECTIONS`,
+  :data:`MAX_POINTS_LIMIT`);
+* :mod:`.poincare_events`: the compiled integrators with the event, once per process and copied
+  once per thread, and the callbacks that record the crossings;
+* :mod:`.poincare_result`: the :class:`Section` and the post-processing (the Newton step onto the
+  surface, points, coordinates, residual, drift).
 """
 
 from __future__ import annotations
 
-import copy
 import math
-import re
-import threading
 import time
-from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
-from functools import lru_cache
 
 import heyoka as hy
 import numpy as np
-import sympy as sp
 
+from nonholonomic.analysis.poincare_events import _BatchCrossings, _integrator
+from nonholonomic.analysis.poincare_request import (
+    DIRECTIONS,
+    MAX_POINTS_LIMIT,
+    _check_arrays,
+    _Request,
+    _validate,
+)
+from nonholonomic.analysis.poincare_result import NEWTON_BOUND, Section, _finish  # noqa: F401 (NEWTON_BOUND: re-exported)
+from nonholonomic.analysis.poincare_surface import (
+    SurfaceError,
+    default_coordinates,
+    parse_surface,
+    surface_names,
+    surface_scale_of,
+)
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.expressions import ExpressionError, integrable, parse_expression
-from nonholonomic.integration import MACHINE_EPSILON, IntegrationCancelled, IntegrationError, ProgressCallback
-from nonholonomic.kernels import VectorKernel
-from nonholonomic.taylor import TaylorSystem, taylor_system
+from nonholonomic.integration import (
+    MACHINE_EPSILON,
+    IntegrationCancelled,
+    IntegrationError,
+    ProgressCallback,
+)
 
 __all__ = [
     "DIRECTIONS",
@@ -71,482 +94,12 @@ __all__ = [
     "surface_scale_of",
 ]
 
-#: ``increasing``: S − value goes from negative to positive; ``decreasing``: the reverse; ``both``.
-DIRECTIONS = ("increasing", "decreasing", "both")
-#: Largest ``max_points`` accepted (the service may configure a lower one).
-MAX_POINTS_LIMIT = 1_000_000
 #: Propagation segments: at least this many steps each ...
 SEGMENT_MIN_STEPS = 256
 #: ... at most this many (bounds the time between two progress calls) ...
 SEGMENT_MAX_STEPS = 20_000
 #: ... and otherwise this fraction of ``t_final``.
 SEGMENT_FRACTION = 0.01
-#: The Newton correction of a crossing time is accepted up to this many ``eps·max(|t|, h_max)``.
-NEWTON_BOUND = 64.0
-
-_HEYOKA_DIRECTION = {
-    "increasing": hy.event_direction.positive,
-    "decreasing": hy.event_direction.negative,
-    "both": hy.event_direction.any,
-}
-_NOT_SMOOTH = re.compile(r"\b(abs|sign)\s*\(")
-
-
-class SurfaceError(ValueError):
-    """A refused field of a section request.
-
-    Attributes
-    ----------
-    field : the request field: ``"surface"``, ``"value"``, ``"direction"``, ``"coordinates"``,
-        ``"coordinates[i]"``, ``"max_points"``, ``"t_final"``, ``"tolerance"``, ``"initial_state"``,
-        ``"parameters"``.
-    reason : why, in words (for an unknown name it lists the allowed ones).
-    position : 0-based character offset in the surface's text, when there is one.
-    """
-
-    def __init__(self, field: str, reason: str, position: int | None = None) -> None:
-        self.field, self.reason, self.position = field, reason, position
-        where = f" (at position {position})" if position is not None else ""
-        super().__init__(f"{field}: {reason}{where}")
-
-
-# --------------------------------------------------------------------------------------------------
-# Surfaces: names, parsing, numeric kernels
-# --------------------------------------------------------------------------------------------------
-
-@lru_cache(maxsize=64)
-def _surface_names(system: MechanicalSystem) -> tuple[tuple[str, sp.Expr], ...]:
-    names: dict[str, sp.Expr] = {str(s): s for s in system.state_symbols}
-    for vec in system.derived:
-        for i, expr in enumerate(vec.expression):
-            names.setdefault(f"{vec.name}{i + 1}", expr)
-    return tuple(names.items())
-
-
-def surface_names(system: MechanicalSystem) -> dict[str, sp.Expr]:
-    """Component name → its expression in the state, for every name a surface or a coordinate may use.
-
-    The state components (``M1`` ... ``gamma3`` for the ball) map to their own symbols; the
-    components of derived vectors map to their expressions (``omega1`` → the first row of
-    ``I_Q⁻¹ M``, paper eq. 2604-1). Parameters are not components (a surface may still use them,
-    see :func:`parse_surface`).
-    """
-    return dict(_surface_names(system))
-
-
-def default_coordinates(system: MechanicalSystem) -> tuple[str, str]:
-    """The two coordinates a section shows by default: ``gamma1, gamma2`` where the state has γ,
-    else the first two components of the first state vector."""
-    vec = next((v for v in system.state if v.name == "gamma"), system.state[0])
-    return str(vec.symbols[0]), str(vec.symbols[1])
-
-
-def _heyoka_ready(expr: sp.Expr) -> sp.Expr:
-    """Rewrite what heyoka's ``from_sympy`` lacks: cot, sec, csc and Euler's number."""
-    expr = expr.replace(sp.cot, lambda a: 1 / sp.tan(a)).replace(sp.sec, lambda a: 1 / sp.cos(a))
-    expr = expr.replace(sp.csc, lambda a: 1 / sp.sin(a))
-    return expr.xreplace({sp.E: sp.Float(sp.E.evalf(40), 40)})
-
-
-@lru_cache(maxsize=256)
-def _parse_surface(system: MechanicalSystem, text: str) -> sp.Expr:
-    names = _surface_names(system)
-    symbols: dict[str, sp.Symbol] = {}
-    placeholders: dict[sp.Symbol, sp.Expr] = {}
-    for name, expr in names:
-        if isinstance(expr, sp.Symbol) and str(expr) == name:
-            symbols[name] = expr
-        else:
-            placeholder = sp.Dummy(name, real=True)
-            symbols[name] = placeholder
-            placeholders[placeholder] = expr
-    for par in system.parameter_symbols:
-        symbols.setdefault(str(par), par)
-    try:
-        raw = parse_expression(text, symbols)
-    except ExpressionError as err:
-        reason = err.reason.replace("; declared: ", "; allowed names: ", 1)
-        raise SurfaceError("surface", reason, err.position) from None
-    expr = raw.xreplace(placeholders)
-    components = ", ".join(name for name, _ in names)
-    if not expr.free_symbols & set(system.state_symbols):
-        raise SurfaceError("surface", f"{text.strip()!r} is not a function of the state; a surface must depend "
-                                      f"on at least one of {components}")
-    if expr.has(sp.Abs, sp.sign):
-        match = _NOT_SMOOTH.search(text)
-        raise SurfaceError("surface", "a surface must be a smooth function of the state (abs and sign are not "
-                                      "smooth; e.g. write gamma3, not abs(gamma3))",
-                           match.start() if match else None)
-    try:
-        integrable(expr)  # heyoka's translation takes rational exponents only (x**pi would recurse)
-    except ExpressionError as err:
-        raise SurfaceError("surface", err.reason) from None
-    try:
-        taylor_system(system).expression(_heyoka_ready(expr))
-    except (TypeError, ValueError) as exc:  # pragma: no cover - every parser function is translatable
-        raise SurfaceError("surface", f"cannot be compiled for the integrator: {exc}") from None
-    return expr
-
-
-def parse_surface(system: MechanicalSystem, text: str) -> sp.Expr:
-    """The surface's expression in the state (and parameter) symbols of ``system``.
-
-    Parameters
-    ----------
-    system : the symbolic definition.
-    text : e.g. ``"gamma3"``, ``"omega1 - 0.1"``, ``"M1*gamma1 + M2*gamma2"``, ``"I1*omega1 - M1"``.
-        Names: the components of :func:`surface_names` (state and derived vectors) and the system's
-        parameters (``I1``, ``D``, ``a1`` ...); the functions and constants of the safe parser.
-
-    Returns
-    -------
-    sympy.Expr
-        With the derived components replaced by their expressions in the state.
-
-    Raises
-    ------
-    SurfaceError
-        ``field="surface"``: a parse error or an unknown name (with its ``position``; the reason
-        lists the allowed names), an expression depending on no state component (``"1"``,
-        ``"pi"``, ``"I1"``), or a non-smooth one (``abs``, ``sign``).
-    """
-    if not isinstance(text, str):
-        raise SurfaceError("surface", f"must be a string, got {type(text).__name__}")
-    return _parse_surface(system, text)
-
-
-def _vectorize(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> VectorKernel:
-    """``f(X, p) -> (n, len(exprs))`` like :func:`nonholonomic.kernels.vectorize`, writing the columns
-    into one array (no per-column broadcast: the post-processing of a short section stays cheap)."""
-    fn = sp.lambdify(list(args), list(exprs), modules="numpy", cse=True)
-    width = len(exprs)
-
-    def evaluate(X: np.ndarray, p: np.ndarray) -> np.ndarray:
-        out = np.empty((len(X), width))
-        for j, column in enumerate(fn(*X.T, *p)):
-            out[:, j] = column
-        return out
-
-    return evaluate
-
-
-@dataclass(frozen=True, eq=False)
-class _SurfaceKernels:
-    """The numpy kernels of one (system, surface), each one ``lambdify`` with common subexpressions.
-
-    ``newton(X, p)`` columns: ``S``, ``∇S`` (n), ``f`` (n), then ``ρ`` if the system has a reduced time.
-    ``report(X, p)`` columns: ``S``, ``∇S`` (n), the derived vectors' components, the integrals, their
-    scales. ``vector_of[i]`` is the state vector holding component ``i``; ``slices`` the vectors' columns.
-    """
-
-    n: int
-    newton: VectorKernel
-    report: VectorKernel
-    derived: tuple[tuple[str, slice], ...]
-    integrals: slice
-    integral_scales: slice
-    vector_of: np.ndarray
-    slices: tuple[slice, ...]
-
-
-@lru_cache(maxsize=64)
-def _surface_kernels(system: MechanicalSystem, expr: sp.Expr) -> _SurfaceKernels:
-    args = system.state_symbols + system.parameter_symbols
-    n = system.dimension
-    slices, vector_of, start = [], [], 0
-    for k, vec in enumerate(system.state):
-        slices.append(slice(start, start + len(vec.symbols)))
-        vector_of += [k] * len(vec.symbols)
-        start += len(vec.symbols)
-    head = [expr] + [sp.diff(expr, s) for s in system.state_symbols]
-    tau = [system.reduced_time.density] if system.reduced_time is not None else []
-    derived, column, components = [], 1 + n, []
-    for vec in system.derived:
-        derived.append((vec.name, slice(column, column + len(vec.expression))))
-        components += list(vec.expression)
-        column += len(vec.expression)
-    k = len(system.integrals)
-    report = head + components + [i.expression for i in system.integrals] + [i.scale for i in system.integrals]
-    return _SurfaceKernels(n=n, newton=_vectorize(head + list(system.rhs) + tau, args), report=_vectorize(report, args),
-                           derived=tuple(derived), integrals=slice(column, column + k),
-                           integral_scales=slice(column + k, column + 2 * k), vector_of=np.asarray(vector_of),
-                           slices=tuple(slices))
-
-
-@dataclass(frozen=True, eq=False)
-class _Prepared:
-    """Everything one (system, surface text) needs, looked up once per call."""
-
-    system: MechanicalSystem
-    text: str
-    expr: sp.Expr
-    ts: TaylorSystem
-    kernels: _SurfaceKernels
-    names: tuple[str, ...]
-    locate: dict[str, tuple[str, int]]  # component name -> (vector name, index)
-    default_coordinates: tuple[str, str]
-
-
-@lru_cache(maxsize=128)
-def _prepare(system: MechanicalSystem, text: str) -> _Prepared:
-    expr = parse_surface(system, text)
-    locate = {str(sym): (vec.name, i) for vec in system.state for i, sym in enumerate(vec.symbols)}
-    for vec in system.derived:
-        for i in range(len(vec.expression)):
-            locate.setdefault(f"{vec.name}{i + 1}", (vec.name, i))
-    return _Prepared(system, text, expr, taylor_system(system), _surface_kernels(system, expr),
-                     tuple(name for name, _ in _surface_names(system)), locate, default_coordinates(system))
-
-
-def _scale(kernels: _SurfaceKernels, points: np.ndarray, gradient: np.ndarray, value: float) -> float:
-    scale = abs(value)
-    if len(points):
-        norms = np.stack([np.linalg.norm(points[:, s], axis=1) for s in kernels.slices], axis=1)
-        natural = float(np.max(np.sum(np.abs(gradient) * norms[:, kernels.vector_of], axis=1)))
-        if math.isfinite(natural):
-            scale = max(scale, natural)
-    return scale if scale > 0 and math.isfinite(scale) else 1.0
-
-
-def surface_scale_of(system: MechanicalSystem, expr: sp.Expr, points: np.ndarray, p: np.ndarray,
-                     value: float) -> float:
-    """The scale ``surface_residual_max`` is relative to.
-
-    ``max(|value|, max over the points of Σ_i |∂S/∂x_i| · |v(i)|)``, where ``v(i)`` is the state
-    vector holding component ``i`` (``|γ|`` for ``gamma3``): to first order, the change of S when
-    every state vector is perturbed by its own size, i.e. the size S's rounding errors are measured
-    against. 1 for ``S = gamma3`` on |γ| = 1; ``|M|`` for ``S = M1``. Falls back to 1 when that is 0
-    (no points, or a surface with a vanishing gradient there).
-    """
-    kernels = _surface_kernels(system, expr)
-    points = np.asarray(points, dtype=float).reshape(-1, system.dimension)
-    gradient = kernels.report(points, p)[:, 1:1 + kernels.n] if len(points) else np.empty((0, kernels.n))
-    return _scale(kernels, points, gradient, value)
-
-
-# --------------------------------------------------------------------------------------------------
-# The result
-# --------------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Section:
-    """The crossings of one trajectory with the surface ``S = value``, in time order.
-
-    Attributes
-    ----------
-    surface : the surface's text as requested; value, direction : as requested.
-    t : crossing times, shape ``(count,)``.
-    tau : the reduced time τ at the crossings (None for systems without one).
-    points : every state vector and derived vector by name (``M``, ``gamma``, ``omega`` for the
-        ball), each of shape ``(count, 3)``.
-    coordinate_names, coordinates : the two chosen components, ``coordinates`` of shape ``(count, 2)``.
-    surface_residual_max : ``max |S(x) − value| / surface_scale`` at the points (0 without points).
-    surface_scale : see :func:`surface_scale_of`.
-    integral_drift_max : per first integral of the system, ``max |I(x) − I(x0)| / max(|I(x0)|, scale)``
-        over the points, ``scale`` the integral's natural size (largest over x0 and the points), as in
-        :mod:`nonholonomic.evidence.integrals`.
-    stopped_early : True when ``max_points`` crossings were recorded and the integration stopped
-        before ``t_final``.
-    warnings : what the caller should know (max_points reached, no crossing, tangent crossings).
-    steps : accepted Taylor steps; wall_time_s : integration and post-processing time (for a
-        member of :func:`section_batch`, its share of its batch's time). Compilation is not counted.
-    t_final : the requested end time; tolerance : heyoka's tolerance.
-    """
-
-    surface: str
-    value: float
-    direction: str
-    t: np.ndarray
-    tau: np.ndarray | None
-    points: dict[str, np.ndarray]
-    coordinate_names: tuple[str, str]
-    coordinates: np.ndarray
-    surface_residual_max: float
-    surface_scale: float
-    integral_drift_max: dict[str, float]
-    stopped_early: bool
-    warnings: tuple[str, ...]
-    steps: int
-    wall_time_s: float
-    t_final: float = 0.0
-    tolerance: float = MACHINE_EPSILON
-
-    @property
-    def count(self) -> int:
-        """Number of crossings."""
-        return int(len(self.t))
-
-
-# --------------------------------------------------------------------------------------------------
-# Validation
-# --------------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class _Request:
-    prep: _Prepared
-    value: float
-    direction: str
-    coordinates: tuple[str, str]
-    max_points: int
-    t_final: float
-    tolerance: float
-
-    @property
-    def system(self) -> MechanicalSystem:
-        return self.prep.system
-
-    @property
-    def text(self) -> str:
-        return self.prep.text
-
-    @property
-    def expr(self) -> sp.Expr:
-        return self.prep.expr
-
-
-def _validate(system: MechanicalSystem, surface: str, value: float, direction: str,
-              coordinates: Sequence[str] | None, max_points: int, t_final: float,
-              tolerance: float | None) -> _Request:
-    if not isinstance(surface, str):
-        raise SurfaceError("surface", f"must be a string, got {type(surface).__name__}")
-    prep = _prepare(system, surface)
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise SurfaceError("value", f"must be a number, got {value!r}") from None
-    if not math.isfinite(value):
-        raise SurfaceError("value", f"must be finite, got {value!r}")
-    if direction not in DIRECTIONS:
-        raise SurfaceError("direction", f"must be one of {', '.join(DIRECTIONS)}; got {direction!r}")
-    names = prep.names
-    coords = prep.default_coordinates if coordinates is None else coordinates
-    if isinstance(coords, str) or not isinstance(coords, Sequence) or len(coords) != 2:
-        raise SurfaceError("coordinates", f"must be a list of two component names, got {coords!r}")
-    for i, name in enumerate(coords):
-        if not isinstance(name, str) or name not in names:
-            raise SurfaceError(f"coordinates[{i}]", f"unknown component {name!r}; allowed: {', '.join(names)}")
-    if coords[0] == coords[1]:
-        raise SurfaceError("coordinates[1]", f"the two coordinates must differ (both are {coords[0]!r})")
-    if isinstance(max_points, bool) or not isinstance(max_points, (int, np.integer)):
-        raise SurfaceError("max_points", f"must be an integer, got {max_points!r}")
-    if not 1 <= max_points <= MAX_POINTS_LIMIT:
-        raise SurfaceError("max_points", f"must be between 1 and {MAX_POINTS_LIMIT}, got {max_points}")
-    try:
-        t_final = float(t_final)
-    except (TypeError, ValueError):
-        raise SurfaceError("t_final", f"must be a number, got {t_final!r}") from None
-    if not (math.isfinite(t_final) and t_final > 0):
-        raise SurfaceError("t_final", f"must be finite and > 0, got {t_final!r}")
-    tol = MACHINE_EPSILON if tolerance is None else float(tolerance)
-    if not (math.isfinite(tol) and 0 < tol < 1):
-        raise SurfaceError("tolerance", f"must be in (0, 1), got {tolerance!r}")
-    return _Request(prep, value, direction, (coords[0], coords[1]), int(max_points), t_final, tol)
-
-
-def _check_arrays(system: MechanicalSystem, parameters: np.ndarray, states: np.ndarray) -> None:
-    n_par = len(system.parameter_symbols)
-    if parameters.shape[-1] != n_par:
-        raise SurfaceError("parameters", f"needs {n_par} values per member, got shape {parameters.shape}")
-    if states.shape[-1] != system.dimension:
-        raise SurfaceError("initial_state", f"needs {system.dimension} components, got shape {states.shape}")
-    if not np.all(np.isfinite(parameters)):
-        raise SurfaceError("parameters", "non-finite value")
-    if not np.all(np.isfinite(states)):
-        raise SurfaceError("initial_state", "non-finite component")
-
-
-# --------------------------------------------------------------------------------------------------
-# Compiled integrators with the event (once per process, copied once per thread)
-# --------------------------------------------------------------------------------------------------
-
-class _Crossings:
-    """nt_event callback of the scalar integrator: the dense-output state at each crossing."""
-
-    def __init__(self) -> None:
-        self.reset(0, 0)
-
-    def reset(self, n_vars: int, capacity: int) -> None:
-        size = min(capacity, 256)
-        self.t, self.x = np.empty(size), np.empty((size, n_vars))
-        self.count, self.seen, self.capacity = 0, 0, capacity
-
-    def _grow(self) -> None:
-        size = min(2 * len(self.t) + 1, self.capacity)
-        self.t = np.resize(self.t, size)
-        self.x = np.concatenate([self.x, np.empty((size - len(self.x), self.x.shape[1]))])
-
-    def __call__(self, ta: hy.taylor_adaptive, t: float, d_sgn: int) -> None:
-        self.seen += 1
-        k = self.count
-        if k >= self.capacity:
-            return
-        if k == len(self.t):
-            self._grow()
-        ta.update_d_output(t)
-        self.t[k] = t
-        self.x[k] = ta.d_output
-        self.count = k + 1
-
-
-class _BatchCrossings:
-    """nt_event_batch callback: one :class:`_Crossings` per lane (capacity 0 for padding lanes)."""
-
-    def __init__(self, batch: int) -> None:
-        self.lanes = [_Crossings() for _ in range(batch)]
-
-    def reset(self, n_vars: int, capacities: Sequence[int]) -> None:
-        for lane, capacity in zip(self.lanes, capacities):
-            lane.reset(n_vars, capacity)
-
-    def __call__(self, ta: hy.taylor_adaptive_batch, t: float, d_sgn: int, idx: int) -> None:
-        lane = self.lanes[idx]
-        lane.seen += 1
-        k = lane.count
-        if k >= lane.capacity:
-            return
-        if k == len(lane.t):
-            lane._grow()
-        times = np.array(ta.time)  # a copy: the other lanes' times stay untouched
-        times[idx] = t
-        ta.update_d_output(times)
-        lane.t[k] = t
-        lane.x[k] = ta.d_output[:, idx]
-        lane.count = k + 1
-
-
-@lru_cache(maxsize=16)
-def _template(system: MechanicalSystem, expr: sp.Expr, direction: str, tolerance: float,
-              batch: int) -> hy.taylor_adaptive | hy.taylor_adaptive_batch:
-    """Compile the integrator of ``system`` with the event ``S − par[n_pars]`` (``batch = 0``: scalar)."""
-    ts = taylor_system(system)
-    event = ts.expression(_heyoka_ready(expr)) - hy.par[ts.n_pars]
-    n_vars = len(ts.variables)
-    if batch == 0:
-        return hy.taylor_adaptive(ts.equations, [0.0] * n_vars, pars=[0.0] * (ts.n_pars + 1), tol=tolerance,
-                                  nt_events=[hy.nt_event(event, _Crossings(), direction=_HEYOKA_DIRECTION[direction])])
-    return hy.taylor_adaptive_batch(
-        ts.equations, np.zeros((n_vars, batch)), pars=np.zeros((ts.n_pars + 1, batch)), tol=tolerance,
-        nt_events=[hy.nt_event_batch(event, _BatchCrossings(batch), direction=_HEYOKA_DIRECTION[direction])])
-
-
-_per_thread = threading.local()
-_PER_THREAD_CAPACITY = 8
-
-
-def _integrator(prep: _Prepared, direction: str, tolerance: float, batch: int = 0
-                ) -> tuple[hy.taylor_adaptive | hy.taylor_adaptive_batch, _Crossings | _BatchCrossings]:
-    """This thread's copy of the compiled integrator and its event callback (a small LRU per thread)."""
-    cache: OrderedDict = _per_thread.__dict__.setdefault("cache", OrderedDict())
-    key = (id(prep), direction, tolerance, batch)
-    entry = cache.get(key)
-    if entry is not None and entry[0] is prep:
-        cache.move_to_end(key)
-    else:
-        ta = copy.deepcopy(_template(prep.system, prep.expr, direction, tolerance, batch))
-        entry = cache[key] = (prep, ta, ta.nt_events[0].callback)
-        while len(cache) > _PER_THREAD_CAPACITY:
-            cache.popitem(last=False)
-    return entry[1], entry[2]
 
 
 def _next_segment(t_final: float, t_now: float, steps: float, crossings: int, remaining: int) -> float:
@@ -597,73 +150,6 @@ def _propagate(ta: hy.taylor_adaptive, t_next: float, t_final: float,
         if progress is not None and not progress(min(ta.time / t_final, 1.0)):
             raise IntegrationCancelled(f"cancelled at t = {ta.time:g}")
 
-
-# --------------------------------------------------------------------------------------------------
-# Post-processing: Newton step onto the surface, points, coordinates, residual, drift
-# --------------------------------------------------------------------------------------------------
-
-def _finish(req: _Request, p: np.ndarray, y0: np.ndarray, t: np.ndarray, raw: np.ndarray, max_h: float,
-            stopped_early: bool, steps: int, start: float, wall_share: float = 1.0) -> Section:
-    system = req.system
-    n = system.dimension
-    kernels = req.prep.kernels
-    order = np.argsort(t, kind="stable")
-    t, raw = t[order], raw[order]
-    x = raw[:, :n].copy()
-    tau = raw[:, n].copy() if system.reduced_time is not None else None
-    warnings: list[str] = []
-
-    if len(t):
-        # One Newton step along the flow: undo the rounding of the event time to a double.
-        columns = kernels.newton(x, p)
-        f = columns[:, 1 + n:1 + 2 * n]
-        g = columns[:, 0] - req.value
-        dg = np.sum(columns[:, 1:1 + n] * f, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            delta = -g / dg
-        bound = NEWTON_BOUND * MACHINE_EPSILON * np.maximum(np.abs(t), max_h)
-        ok = np.isfinite(delta) & (np.abs(delta) <= bound)
-        delta = np.where(ok, delta, 0.0)
-        if tau is not None:
-            tau = tau + columns[:, 1 + 2 * n] * delta
-        x = x + f * delta[:, None]
-        t = t + delta
-        if not np.all(ok):
-            warnings.append(f"{int(np.sum(~ok))} crossing(s) nearly tangent to the surface (dS/dt ~ 0): their "
-                            "points are the integrator's event points, not refined onto the surface")
-    else:
-        warnings.append(f"no crossing of {req.text!r} = {req.value:g} ({req.direction}) in 0 <= t <= "
-                        f"{req.t_final:g}")
-    if stopped_early:
-        warnings.append(f"max_points = {req.max_points} reached at t = {t[-1]:.9g}; the integration stopped "
-                        f"there instead of at t_final = {req.t_final:g}")
-
-    # Everything reported, evaluated at the initial state (row 0) and the points in one kernel call.
-    report = kernels.report(np.vstack([y0[None, :], x]), p)
-    at_points = report[1:]
-    points: dict[str, np.ndarray] = {vec.name: x[:, cols].copy() for vec, cols in zip(system.state, kernels.slices)}
-    for name, cols in kernels.derived:
-        points[name] = at_points[:, cols].copy()
-    coordinates = np.stack([points[vec][:, i] for vec, i in (req.prep.locate[c] for c in req.coordinates)], axis=1)
-
-    scale = _scale(kernels, x, at_points[:, 1:1 + n], req.value)
-    residual = float(np.max(np.abs(at_points[:, 0] - req.value)) / scale) if len(t) else 0.0
-
-    drift: dict[str, float] = {}
-    if system.integrals:
-        values = report[:, kernels.integrals]
-        reference = np.maximum(np.abs(values[0]), np.max(np.abs(report[:, kernels.integral_scales]), axis=0))
-        reference = np.where(reference > 0, reference, 1.0)
-        rel = np.max(np.abs(values - values[0]), axis=0) / reference
-        drift = {claim.name: float(rel[i]) for i, claim in enumerate(system.integrals)}
-
-    return Section(
-        surface=req.text, value=req.value, direction=req.direction, t=t, tau=tau, points=points,
-        coordinate_names=req.coordinates, coordinates=coordinates, surface_residual_max=residual,
-        surface_scale=scale, integral_drift_max=drift, stopped_early=stopped_early, warnings=tuple(warnings),
-        steps=int(steps), wall_time_s=(time.perf_counter() - start) * wall_share, t_final=req.t_final,
-        tolerance=req.tolerance,
-    )
 
 
 # --------------------------------------------------------------------------------------------------

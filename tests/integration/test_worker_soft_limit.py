@@ -35,8 +35,8 @@ CALIBRATION_T = 2e4
 #: Soft limit past the trajectory's phase, hard limit before the spectrum's one propagation ends (4 s
 #: apart: a cooperative check comes every piece of 2,000 steps, well under a second even when loaded).
 SOFT_S, HARD_S = 15, 19
-#: Seconds the trajectory phase is made to take (the spectrum's propagation takes 4-10 times longer, per
-#: unit of time, than the trajectory: 30-75 s, past the hard limit on any machine; measured, not assumed).
+#: Seconds the trajectory phase is made to take (the spectrum's propagation takes 5-10 times longer, per
+#: unit of time, than the trajectory: past the hard limit; measured on this machine, not assumed).
 TRAJECTORY_S = SOFT_S / 2
 
 
@@ -65,11 +65,13 @@ def test_the_soft_time_limit_ends_a_job_inside_a_long_heyoka_call(tmp_path):
                                        .headers["location"], timeout=180)
                 assert calibration["status"] == "succeeded", calibration["error"]
             result = calibration["result"]
-            per_unit_t = result["integration"]["wall_time_s"] / CALIBRATION_T
-            t_final = TRAJECTORY_S / per_unit_t
-            ratio = result["lyapunov"]["wall_time_s"] / result["integration"]["wall_time_s"]
-            print(f"t_final {t_final:.3g}: trajectory ~{TRAJECTORY_S:g} s, spectrum ~{ratio * TRAJECTORY_S:.0f} s")
-            assert ratio * TRAJECTORY_S > 1.5 * (HARD_S - TRAJECTORY_S)  # the spectrum outlasts the hard limit
+            trajectory_rate = result["integration"]["wall_time_s"] / CALIBRATION_T  # s per unit of t
+            spectrum_rate = result["lyapunov"]["wall_time_s"] / CALIBRATION_T
+            # the trajectory takes ~TRAJECTORY_S; and whatever noise the short timings carry, the job as a
+            # whole outlasts the hard limit three times, so the soft limit always falls inside it
+            t_final = max(TRAJECTORY_S / trajectory_rate, 3 * HARD_S / (trajectory_rate + spectrum_rate))
+            print(f"t_final {t_final:.3g}: trajectory ~{trajectory_rate * t_final:.1f} s, "
+                  f"spectrum ~{spectrum_rate * t_final:.0f} s")
             location = client.post("/v1/jobs", json=one_long_propagation(t_final)).headers["location"]
             view = poll_job(client, location, timeout=HARD_S * 5)
             assert view["status"] == "failed"

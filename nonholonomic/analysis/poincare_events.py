@@ -1,0 +1,123 @@
+"""Poincaré sections, the events: compiled integrators with the event ``S − value`` and the crossings they record.
+
+heyoka's non-terminal events (``nt_event``, ``nt_event_batch``) on the event function
+``S(x) − value`` find each crossing as a root of the event function's Taylor polynomial inside a
+step; the callbacks (:class:`_Crossings`, :class:`_BatchCrossings`) evaluate the dense output
+(``update_d_output``) at the event time, as heyoka's own Poincaré-section tutorial does.
+``value`` is a runtime parameter (the slot after the system's parameters), so one compiled
+integrator serves every level; it is compiled once per (system, surface, direction, tolerance)
+and process (:func:`_template`), and copied once per thread (:func:`_integrator`).
+Part of :mod:`.poincare` (the front door), where every name is importable.
+"""
+
+from __future__ import annotations
+
+import copy
+import threading
+from collections import OrderedDict
+from collections.abc import Sequence
+from functools import lru_cache
+
+import heyoka as hy
+import numpy as np
+import sympy as sp
+
+from nonholonomic.analysis.poincare_surface import _heyoka_ready, _Prepared
+from nonholonomic.definition import MechanicalSystem
+from nonholonomic.taylor import taylor_system
+
+_HEYOKA_DIRECTION = {
+    "increasing": hy.event_direction.positive,
+    "decreasing": hy.event_direction.negative,
+    "both": hy.event_direction.any,
+}
+
+
+class _Crossings:
+    """nt_event callback of the scalar integrator: the dense-output state at each crossing."""
+
+    def __init__(self) -> None:
+        self.reset(0, 0)
+
+    def reset(self, n_vars: int, capacity: int) -> None:
+        size = min(capacity, 256)
+        self.t, self.x = np.empty(size), np.empty((size, n_vars))
+        self.count, self.seen, self.capacity = 0, 0, capacity
+
+    def _grow(self) -> None:
+        size = min(2 * len(self.t) + 1, self.capacity)
+        self.t = np.resize(self.t, size)
+        self.x = np.concatenate([self.x, np.empty((size - len(self.x), self.x.shape[1]))])
+
+    def __call__(self, ta: hy.taylor_adaptive, t: float, d_sgn: int) -> None:
+        self.seen += 1
+        k = self.count
+        if k >= self.capacity:
+            return
+        if k == len(self.t):
+            self._grow()
+        ta.update_d_output(t)
+        self.t[k] = t
+        self.x[k] = ta.d_output
+        self.count = k + 1
+
+
+class _BatchCrossings:
+    """nt_event_batch callback: one :class:`_Crossings` per lane (capacity 0 for padding lanes)."""
+
+    def __init__(self, batch: int) -> None:
+        self.lanes = [_Crossings() for _ in range(batch)]
+
+    def reset(self, n_vars: int, capacities: Sequence[int]) -> None:
+        for lane, capacity in zip(self.lanes, capacities):
+            lane.reset(n_vars, capacity)
+
+    def __call__(self, ta: hy.taylor_adaptive_batch, t: float, d_sgn: int, idx: int) -> None:
+        lane = self.lanes[idx]
+        lane.seen += 1
+        k = lane.count
+        if k >= lane.capacity:
+            return
+        if k == len(lane.t):
+            lane._grow()
+        times = np.array(ta.time)  # a copy: the other lanes' times stay untouched
+        times[idx] = t
+        ta.update_d_output(times)
+        lane.t[k] = t
+        lane.x[k] = ta.d_output[:, idx]
+        lane.count = k + 1
+
+
+@lru_cache(maxsize=16)
+def _template(system: MechanicalSystem, expr: sp.Expr, direction: str, tolerance: float,
+              batch: int) -> hy.taylor_adaptive | hy.taylor_adaptive_batch:
+    """Compile the integrator of ``system`` with the event ``S − par[n_pars]`` (``batch = 0``: scalar)."""
+    ts = taylor_system(system)
+    event = ts.expression(_heyoka_ready(expr)) - hy.par[ts.n_pars]
+    n_vars = len(ts.variables)
+    if batch == 0:
+        return hy.taylor_adaptive(ts.equations, [0.0] * n_vars, pars=[0.0] * (ts.n_pars + 1), tol=tolerance,
+                                  nt_events=[hy.nt_event(event, _Crossings(), direction=_HEYOKA_DIRECTION[direction])])
+    return hy.taylor_adaptive_batch(
+        ts.equations, np.zeros((n_vars, batch)), pars=np.zeros((ts.n_pars + 1, batch)), tol=tolerance,
+        nt_events=[hy.nt_event_batch(event, _BatchCrossings(batch), direction=_HEYOKA_DIRECTION[direction])])
+
+
+_per_thread = threading.local()
+_PER_THREAD_CAPACITY = 8
+
+
+def _integrator(prep: _Prepared, direction: str, tolerance: float, batch: int = 0
+                ) -> tuple[hy.taylor_adaptive | hy.taylor_adaptive_batch, _Crossings | _BatchCrossings]:
+    """This thread's copy of the compiled integrator and its event callback (a small LRU per thread)."""
+    cache: OrderedDict = _per_thread.__dict__.setdefault("cache", OrderedDict())
+    key = (id(prep), direction, tolerance, batch)
+    entry = cache.get(key)
+    if entry is not None and entry[0] is prep:
+        cache.move_to_end(key)
+    else:
+        ta = copy.deepcopy(_template(prep.system, prep.expr, direction, tolerance, batch))
+        entry = cache[key] = (prep, ta, ta.nt_events[0].callback)
+        while len(cache) > _PER_THREAD_CAPACITY:
+            cache.popitem(last=False)
+    return entry[1], entry[2]

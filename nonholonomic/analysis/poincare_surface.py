@@ -1,0 +1,262 @@
+"""Poincaré sections, the surface: a user's expression ``S(state)``, its checks and its numeric kernels.
+
+A surface is a user expression in the state components (``M1``, ``gamma3``, ``omega2`` ...,
+parsed by the safe parser :func:`nonholonomic.expressions.parse_expression`, never ``eval``),
+possibly using the system's parameters (``I1``, ``D`` ...). Derived components (the ball's
+``omega = I_Q⁻¹ M``, paper eq. 2604-1) are substituted by their expressions in the state, so
+every surface is a function of the integrated variables. A refused request field raises
+:class:`SurfaceError`.
+
+The numpy kernels (``S``, ``∇S``, the flow, ρ, the derived vectors, the first integrals) serve the
+Newton step onto the surface and the measures of :mod:`.poincare_result`; the surface's scale is
+:func:`surface_scale_of`. Part of :mod:`.poincare` (the front door), where every name is importable.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import sympy as sp
+
+from nonholonomic.definition import MechanicalSystem
+from nonholonomic.expressions import ExpressionError, integrable, parse_expression
+from nonholonomic.kernels import VectorKernel
+from nonholonomic.taylor import TaylorSystem, taylor_system
+
+_NOT_SMOOTH = re.compile(r"\b(abs|sign)\s*\(")
+
+class SurfaceError(ValueError):
+    """A refused field of a section request.
+
+    Attributes
+    ----------
+    field : the request field: ``"surface"``, ``"value"``, ``"direction"``, ``"coordinates"``,
+        ``"coordinates[i]"``, ``"max_points"``, ``"t_final"``, ``"tolerance"``, ``"initial_state"``,
+        ``"parameters"``.
+    reason : why, in words (for an unknown name it lists the allowed ones).
+    position : 0-based character offset in the surface's text, when there is one.
+    """
+
+    def __init__(self, field: str, reason: str, position: int | None = None) -> None:
+        self.field, self.reason, self.position = field, reason, position
+        where = f" (at position {position})" if position is not None else ""
+        super().__init__(f"{field}: {reason}{where}")
+
+
+# --------------------------------------------------------------------------------------------------
+# Surfaces: names, parsing, numeric kernels
+# --------------------------------------------------------------------------------------------------
+
+@lru_cache(maxsize=64)
+def _surface_names(system: MechanicalSystem) -> tuple[tuple[str, sp.Expr], ...]:
+    names: dict[str, sp.Expr] = {str(s): s for s in system.state_symbols}
+    for vec in system.derived:
+        for i, expr in enumerate(vec.expression):
+            names.setdefault(f"{vec.name}{i + 1}", expr)
+    return tuple(names.items())
+
+
+def surface_names(system: MechanicalSystem) -> dict[str, sp.Expr]:
+    """Component name → its expression in the state, for every name a surface or a coordinate may use.
+
+    The state components (``M1`` ... ``gamma3`` for the ball) map to their own symbols; the
+    components of derived vectors map to their expressions (``omega1`` → the first row of
+    ``I_Q⁻¹ M``, paper eq. 2604-1). Parameters are not components (a surface may still use them,
+    see :func:`parse_surface`).
+    """
+    return dict(_surface_names(system))
+
+
+def default_coordinates(system: MechanicalSystem) -> tuple[str, str]:
+    """The two coordinates a section shows by default: ``gamma1, gamma2`` where the state has γ,
+    else the first two components of the first state vector."""
+    vec = next((v for v in system.state if v.name == "gamma"), system.state[0])
+    return str(vec.symbols[0]), str(vec.symbols[1])
+
+
+def _heyoka_ready(expr: sp.Expr) -> sp.Expr:
+    """Rewrite what heyoka's ``from_sympy`` lacks: cot, sec, csc and Euler's number."""
+    expr = expr.replace(sp.cot, lambda a: 1 / sp.tan(a)).replace(sp.sec, lambda a: 1 / sp.cos(a))
+    expr = expr.replace(sp.csc, lambda a: 1 / sp.sin(a))
+    return expr.xreplace({sp.E: sp.Float(sp.E.evalf(40), 40)})
+
+
+@lru_cache(maxsize=256)
+def _parse_surface(system: MechanicalSystem, text: str) -> sp.Expr:
+    names = _surface_names(system)
+    symbols: dict[str, sp.Symbol] = {}
+    placeholders: dict[sp.Symbol, sp.Expr] = {}
+    for name, expr in names:
+        if isinstance(expr, sp.Symbol) and str(expr) == name:
+            symbols[name] = expr
+        else:
+            placeholder = sp.Dummy(name, real=True)
+            symbols[name] = placeholder
+            placeholders[placeholder] = expr
+    for par in system.parameter_symbols:
+        symbols.setdefault(str(par), par)
+    try:
+        raw = parse_expression(text, symbols)
+    except ExpressionError as err:
+        reason = err.reason.replace("; declared: ", "; allowed names: ", 1)
+        raise SurfaceError("surface", reason, err.position) from None
+    expr = raw.xreplace(placeholders)
+    components = ", ".join(name for name, _ in names)
+    if not expr.free_symbols & set(system.state_symbols):
+        raise SurfaceError("surface", f"{text.strip()!r} is not a function of the state; a surface must depend "
+                                      f"on at least one of {components}")
+    if expr.has(sp.Abs, sp.sign):
+        match = _NOT_SMOOTH.search(text)
+        raise SurfaceError("surface", "a surface must be a smooth function of the state (abs and sign are not "
+                                      "smooth; e.g. write gamma3, not abs(gamma3))",
+                           match.start() if match else None)
+    try:
+        integrable(expr)  # heyoka's translation takes rational exponents only (x**pi would recurse)
+    except ExpressionError as err:
+        raise SurfaceError("surface", err.reason) from None
+    try:
+        taylor_system(system).expression(_heyoka_ready(expr))
+    except (TypeError, ValueError) as exc:  # pragma: no cover - every parser function is translatable
+        raise SurfaceError("surface", f"cannot be compiled for the integrator: {exc}") from None
+    return expr
+
+
+def parse_surface(system: MechanicalSystem, text: str) -> sp.Expr:
+    """The surface's expression in the state (and parameter) symbols of ``system``.
+
+    Parameters
+    ----------
+    system : the symbolic definition.
+    text : e.g. ``"gamma3"``, ``"omega1 - 0.1"``, ``"M1*gamma1 + M2*gamma2"``, ``"I1*omega1 - M1"``.
+        Names: the components of :func:`surface_names` (state and derived vectors) and the system's
+        parameters (``I1``, ``D``, ``a1`` ...); the functions and constants of the safe parser.
+
+    Returns
+    -------
+    sympy.Expr
+        With the derived components replaced by their expressions in the state.
+
+    Raises
+    ------
+    SurfaceError
+        ``field="surface"``: a parse error or an unknown name (with its ``position``; the reason
+        lists the allowed names), an expression depending on no state component (``"1"``,
+        ``"pi"``, ``"I1"``), or a non-smooth one (``abs``, ``sign``).
+    """
+    if not isinstance(text, str):
+        raise SurfaceError("surface", f"must be a string, got {type(text).__name__}")
+    return _parse_surface(system, text)
+
+
+def _vectorize(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> VectorKernel:
+    """``f(X, p) -> (n, len(exprs))`` like :func:`nonholonomic.kernels.vectorize`, writing the columns
+    into one array (no per-column broadcast: the post-processing of a short section stays cheap)."""
+    fn = sp.lambdify(list(args), list(exprs), modules="numpy", cse=True)
+    width = len(exprs)
+
+    def evaluate(X: np.ndarray, p: np.ndarray) -> np.ndarray:
+        out = np.empty((len(X), width))
+        for j, column in enumerate(fn(*X.T, *p)):
+            out[:, j] = column
+        return out
+
+    return evaluate
+
+
+@dataclass(frozen=True, eq=False)
+class _SurfaceKernels:
+    """The numpy kernels of one (system, surface), each one ``lambdify`` with common subexpressions.
+
+    ``newton(X, p)`` columns: ``S``, ``∇S`` (n), ``f`` (n), then ``ρ`` if the system has a reduced time.
+    ``report(X, p)`` columns: ``S``, ``∇S`` (n), the derived vectors' components, the integrals, their
+    scales. ``vector_of[i]`` is the state vector holding component ``i``; ``slices`` the vectors' columns.
+    """
+
+    n: int
+    newton: VectorKernel
+    report: VectorKernel
+    derived: tuple[tuple[str, slice], ...]
+    integrals: slice
+    integral_scales: slice
+    vector_of: np.ndarray
+    slices: tuple[slice, ...]
+
+
+@lru_cache(maxsize=64)
+def _surface_kernels(system: MechanicalSystem, expr: sp.Expr) -> _SurfaceKernels:
+    args = system.state_symbols + system.parameter_symbols
+    n = system.dimension
+    slices, vector_of, start = [], [], 0
+    for k, vec in enumerate(system.state):
+        slices.append(slice(start, start + len(vec.symbols)))
+        vector_of += [k] * len(vec.symbols)
+        start += len(vec.symbols)
+    head = [expr] + [sp.diff(expr, s) for s in system.state_symbols]
+    tau = [system.reduced_time.density] if system.reduced_time is not None else []
+    derived, column, components = [], 1 + n, []
+    for vec in system.derived:
+        derived.append((vec.name, slice(column, column + len(vec.expression))))
+        components += list(vec.expression)
+        column += len(vec.expression)
+    k = len(system.integrals)
+    report = head + components + [i.expression for i in system.integrals] + [i.scale for i in system.integrals]
+    return _SurfaceKernels(n=n, newton=_vectorize(head + list(system.rhs) + tau, args), report=_vectorize(report, args),
+                           derived=tuple(derived), integrals=slice(column, column + k),
+                           integral_scales=slice(column + k, column + 2 * k), vector_of=np.asarray(vector_of),
+                           slices=tuple(slices))
+
+
+@dataclass(frozen=True, eq=False)
+class _Prepared:
+    """Everything one (system, surface text) needs, looked up once per call."""
+
+    system: MechanicalSystem
+    text: str
+    expr: sp.Expr
+    ts: TaylorSystem
+    kernels: _SurfaceKernels
+    names: tuple[str, ...]
+    locate: dict[str, tuple[str, int]]  # component name -> (vector name, index)
+    default_coordinates: tuple[str, str]
+
+
+@lru_cache(maxsize=128)
+def _prepare(system: MechanicalSystem, text: str) -> _Prepared:
+    expr = parse_surface(system, text)
+    locate = {str(sym): (vec.name, i) for vec in system.state for i, sym in enumerate(vec.symbols)}
+    for vec in system.derived:
+        for i in range(len(vec.expression)):
+            locate.setdefault(f"{vec.name}{i + 1}", (vec.name, i))
+    return _Prepared(system, text, expr, taylor_system(system), _surface_kernels(system, expr),
+                     tuple(name for name, _ in _surface_names(system)), locate, default_coordinates(system))
+
+
+def _scale(kernels: _SurfaceKernels, points: np.ndarray, gradient: np.ndarray, value: float) -> float:
+    scale = abs(value)
+    if len(points):
+        norms = np.stack([np.linalg.norm(points[:, s], axis=1) for s in kernels.slices], axis=1)
+        natural = float(np.max(np.sum(np.abs(gradient) * norms[:, kernels.vector_of], axis=1)))
+        if math.isfinite(natural):
+            scale = max(scale, natural)
+    return scale if scale > 0 and math.isfinite(scale) else 1.0
+
+
+def surface_scale_of(system: MechanicalSystem, expr: sp.Expr, points: np.ndarray, p: np.ndarray,
+                     value: float) -> float:
+    """The scale ``surface_residual_max`` is relative to.
+
+    ``max(|value|, max over the points of Σ_i |∂S/∂x_i| · |v(i)|)``, where ``v(i)`` is the state
+    vector holding component ``i`` (``|γ|`` for ``gamma3``): to first order, the change of S when
+    every state vector is perturbed by its own size, i.e. the size S's rounding errors are measured
+    against. 1 for ``S = gamma3`` on |γ| = 1; ``|M|`` for ``S = M1``. Falls back to 1 when that is 0
+    (no points, or a surface with a vanishing gradient there).
+    """
+    kernels = _surface_kernels(system, expr)
+    points = np.asarray(points, dtype=float).reshape(-1, system.dimension)
+    gradient = kernels.report(points, p)[:, 1:1 + kernels.n] if len(points) else np.empty((0, kernels.n))
+    return _scale(kernels, points, gradient, value)
