@@ -3,6 +3,8 @@
 A computation runs in a daemon thread; the caller waits at most its budget and gets an
 :class:`Outcome` (``done``, ``error``, ``timeout`` or ``busy``). Identical calls (same key) share one
 thread and its result is cached per process, so a proof that outlived a budget answers the next call.
+A finished result whose key pickles is also remembered across processes when a memo is installed
+(:mod:`nonholonomic.memo`): a proof is done once per machine and version, not once per process.
 
 Python threads cannot be killed: a computation past its budget keeps its CPU until it ends. So at
 most :data:`MAX_RUNNING` computations run at once per process; past that a new one is refused
@@ -18,6 +20,8 @@ from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import Any
+
+from nonholonomic import memo
 
 #: Computations allowed to run at once in one process (including those past their budget).
 MAX_RUNNING = 32
@@ -38,19 +42,29 @@ class Outcome:
     value: Any
     seconds: float
     message: str = ""
+    remembered: bool = False
+    """True when the value was read from the memo (``seconds`` is then the original run's)."""
 
 
 class _Task:
-    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...], memo_key: str | None = None) -> None:
         self.done = threading.Event()
         self.value: Any = None
         self.error = ""
         self.seconds = 0.0
+        self.remembered = False
+        self._memo_key = memo_key
         self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True,
                                         name=f"bounded-{getattr(fn, '__name__', 'task')}")
 
     def start(self) -> _Task:
         self._thread.start()
+        return self
+
+    def recalled(self, value: Any, seconds: float) -> _Task:
+        """Finished at once with a remembered ``value`` (computed in ``seconds`` by an earlier process)."""
+        self.value, self.seconds, self.remembered = value, seconds, True
+        self.done.set()
         return self
 
     def _run(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
@@ -60,7 +74,11 @@ class _Task:
         except Exception as exc:  # a sympy failure leaves the claim undecided, not the caller failed
             self.error = f"{type(exc).__name__}: {exc}"
         self.seconds = time.perf_counter() - start
-        self.done.set()
+        try:
+            if self._memo_key is not None and not self.error:  # before done: a waiter's exit cannot cut it
+                memo.keep(self._memo_key, (self.value, self.seconds))
+        finally:
+            self.done.set()
 
     def outcome(self, budget_s: float) -> Outcome:
         budget_s = max(float(budget_s), 0.0)
@@ -69,7 +87,7 @@ class _Task:
                            f"did not finish within {budget_s:.3g} s (it continues in the background)")
         if self.error:
             return Outcome("error", None, self.seconds, self.error)
-        return Outcome("done", self.value, self.seconds)
+        return Outcome("done", self.value, self.seconds, remembered=self.remembered)
 
 
 _tasks: OrderedDict[Hashable, _Task] = OrderedDict()
@@ -81,20 +99,28 @@ def _running() -> int:
 
 
 def start(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...] = ()) -> _Task | None:
-    """The task for ``key``, started now if there is none; None if :data:`MAX_RUNNING` are running."""
+    """The task for ``key``: a running or finished one, one finished at once with what an earlier
+    process remembered, else one started now; None if :data:`MAX_RUNNING` are running."""
     with _lock:
         task = _tasks.get(key)
         if task is not None:
             _tasks.move_to_end(key)
             return task
-        if _running() >= MAX_RUNNING:
+    memo_key = memo.key_of("bounded", key) if memo.installed() else None
+    found, kept = memo.recall(memo_key) if memo_key is not None else (False, None)
+    with _lock:
+        task = _tasks.get(key)
+        if task is not None:  # another thread started it meanwhile
+            return task
+        if not found and _running() >= MAX_RUNNING:
             return None
         while len(_tasks) >= CACHE_SIZE:
             finished = next((k for k, t in _tasks.items() if t.done.is_set()), None)
             if finished is None:
                 break
             del _tasks[finished]
-        task = _tasks[key] = _Task(fn, args).start()
+        task = _Task(fn, args, memo_key)
+        _tasks[key] = task.recalled(*kept) if found else task.start()
         return task
 
 
@@ -116,7 +142,8 @@ def verdict(outcome: Outcome) -> tuple[bool | None, str, Any]:
     if outcome.status == "done":
         out = outcome.value
         payload = out[2] if len(out) > 2 else None
-        return out[0], f"{out[1]} ({outcome.seconds:.2f} s, cached per process)", payload
+        where = "remembered from an earlier process" if outcome.remembered else "cached per process"
+        return out[0], f"{out[1]} ({outcome.seconds:.2f} s, {where})", payload
     if outcome.status == "error":
         return None, f"sympy could not decide: {outcome.message}", None
     return None, f"symbolic proof {outcome.message}", None

@@ -33,11 +33,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
+from importlib import metadata
 
 import heyoka as hy
 import numpy as np
-import scipy
-from scipy.integrate import solve_ivp
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.kernels import numeric
@@ -217,7 +216,7 @@ def _taylor(system: MechanicalSystem) -> TaylorSystem:
 def _versions() -> dict[str, str]:
     import sympy
 
-    return {"heyoka": hy.__version__, "sympy": sympy.__version__, "numpy": np.__version__, "scipy": scipy.__version__}
+    return {"heyoka": hy.__version__, "sympy": sympy.__version__, "numpy": np.__version__, "scipy": metadata.version("scipy")}
 
 
 def _sample_grid(t_final: float, samples: int) -> np.ndarray:
@@ -356,201 +355,6 @@ def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, g
     )
 
 
-def integrate_batch(
-    system: MechanicalSystem,
-    parameters: np.ndarray,
-    initial_states: np.ndarray,
-    t_final: float,
-    samples: int,
-    *,
-    tolerance: float | None = None,
-    progress: ProgressCallback | None = None,
-) -> list[Trajectory | IntegrationError]:
-    """Integrate many members (one system, each with its own parameters and initial state) with
-    heyoka's batch mode, ``hy.recommended_simd_size()`` members at a time.
-
-    Each member gets the :class:`Trajectory` :func:`integrate` would give it (samples, τ, steps and
-    step states for the integral checks, equal up to rounding: the SIMD lanes and the scalar
-    integrator may round differently in the last bit), except ``wall_time_s``: its batch's wall
-    time divided among the batch's members. The last batch is padded with copies of the last
-    member. A member whose lane fails (e.g. a non-finite state) fails alone: its entry is the
-    :class:`IntegrationError` found by integrating it alone with :func:`integrate`'s integrator,
-    and its batch is run again without it (lanes do not influence each other).
-
-    Parameters
-    ----------
-    parameters : shape ``(n_members, n_parameters)``, rows in the order of ``system.parameter_symbols``.
-    initial_states : shape ``(n_members, dimension)``.
-    t_final, samples : the sample grid ``linspace(0, t_final, samples)``, shared by all members.
-    tolerance : heyoka's tolerance (default machine epsilon).
-    progress : ``progress(fraction of members done) -> keep_going``, called after each batch and
-        between the segments of a long run; False cancels (raises :class:`IntegrationCancelled`).
-
-    Returns
-    -------
-    list
-        One entry per member, in order: a :class:`Trajectory` or an :class:`IntegrationError`.
-
-    Raises
-    ------
-    IntegrationCancelled, ValueError
-    """
-    ts = _taylor(system)
-    P = np.asarray(parameters, dtype=float)
-    Y0 = np.asarray(initial_states, dtype=float)
-    if P.ndim != 2 or P.shape[1] != ts.n_user_pars:
-        raise ValueError(f"parameters need shape (n_members, {ts.n_user_pars}), got {P.shape}")
-    if Y0.shape != (len(P), system.dimension):
-        raise ValueError(f"initial_states need shape ({len(P)}, {system.dimension}), got {Y0.shape}")
-    tol = tolerance or MACHINE_EPSILON
-    lanes = hy.recommended_simd_size()
-    run = _BatchRun(ts, _batch_integrator(system, tol, lanes), _sample_grid(float(t_final), int(samples)), tol)
-    pars = ts.runtime_parameters(P.T).T if len(P) else P  # every member's runtime parameters at once
-    results: list[Trajectory | IntegrationError] = []
-    for first in range(0, len(P), lanes):
-        members = slice(first, min(first + lanes, len(P)))
-
-        def within(fraction: float, first: int = first, count: int = members.stop - first) -> bool:
-            return True if progress is None else bool(progress((first + count * fraction) / len(P)))
-
-        results.extend(run.members(P[members], pars[members], Y0[members], within))
-        if progress is not None and len(results) < len(P) and not progress(len(results) / len(P)):
-            raise IntegrationCancelled(f"cancelled after {len(results)} of {len(P)} members")
-    return results
-
-
-#: One lane's result before its wall time is known: samples, τ (or None), step times, step states, steps.
-_Lane = tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray, int]
-
-
-class _BatchRun:
-    """The members of one :func:`integrate_batch` call, one batch integrator's lanes at a time."""
-
-    def __init__(self, ts: TaylorSystem, ta: hy.taylor_adaptive_batch, grid: np.ndarray, tol: float) -> None:
-        self.ts, self.ta, self.grid, self.tol = ts, ta, grid, tol
-        self.lanes = ta.batch_size
-        self.times, self.where = np.unique(grid, return_inverse=True)  # propagate_grid wants increasing times
-        self.lane_grid = np.repeat(self.times[:, None], self.lanes, axis=1)
-        self.versions = _versions()
-
-    def members(self, P: np.ndarray, pars: np.ndarray, Y0: np.ndarray,
-                progress: ProgressCallback) -> list[Trajectory | IntegrationError]:
-        """Up to ``lanes`` members (parameters ``P``, runtime parameters ``pars``, initial states
-        ``Y0``) in one batch; padding lanes run a copy of the last member. A member whose lane
-        fails is integrated alone (for its reason, or its trajectory if it then succeeds) and its
-        lane given to a healthy member for another run of the batch."""
-        alone: dict[int, Trajectory | IntegrationError] = {}
-        start = time.perf_counter()
-        source = list(range(len(P))) + [len(P) - 1] * (self.lanes - len(P))
-        while True:
-            lanes, bad = self.run(pars[source], Y0[source], progress)
-            if not bad:
-                break
-            for i in {source[lane] for lane in bad}:
-                try:
-                    # with progress: a cancellation or time limit acts here too
-                    alone[i] = _integrate_heyoka(self.ts.system, P[i], Y0[i], self.grid, self.tol, progress)
-                except IntegrationError as exc:
-                    alone[i] = exc
-            healthy = [i for i in range(len(P)) if i not in alone]
-            if not healthy:
-                return [alone[i] for i in range(len(P))]
-            source = [healthy[-1] if i in alone else i for i in range(len(P))] + [healthy[-1]] * (self.lanes - len(P))
-        wall = (time.perf_counter() - start) / len(P)
-        return [alone[i] if i in alone else Trajectory(
-            t=self.grid, tau=tau, states=states, step_t=step_t, step_states=step_states, engine="heyoka",
-            tolerance=self.tol, steps=steps, wall_time_s=wall, versions=self.versions,
-        ) for i, (states, tau, step_t, step_states, steps) in enumerate(lanes[:len(P)])]
-
-    def run(self, pars: np.ndarray, Y0: np.ndarray, progress: ProgressCallback) -> tuple[list[_Lane], list[int]]:
-        """One batch, one member per lane: each lane's result, or (if any failed) the failed lanes."""
-        ts, ta, times, lanes = self.ts, self.ta, self.times, self.lanes
-        n, nv = ts.n_state, len(ts.variables)
-        ta.set_time(0.0)
-        ta.state[:n] = Y0.T
-        ta.state[n:] = 0.0  # tau
-        ta.pars[:] = pars.T
-        nsteps = np.zeros(lanes, dtype=np.int64)
-        if len(times) == 1:
-            out = ta.state[None].copy()
-            step_t, step_states = [np.zeros(1)] * lanes, [y[None].copy() for y in Y0]
-        else:
-            # First segment: propagate_grid writes the samples, a lean callback logs the states.
-            # One record per step: the raw bytes of the integrator's state and time buffers.
-            state, clock = memoryview(ta.state).cast("B"), memoryview(ta.time).cast("B")
-            log = bytearray(state) + clock
-            append = log.extend
-
-            def on_step(_: hy.taylor_adaptive_batch) -> bool:
-                append(state)
-                append(clock)
-                return True
-
-            _, out = ta.propagate_grid(self.lane_grid, max_steps=FIRST_SEGMENT_STEPS, callback=on_step)
-            res = ta.propagate_res
-            bad = [j for j, r in enumerate(res) if r[0] not in _GOING]
-            if bad:
-                return [], bad
-            nsteps[:] = [r[3] for r in res]
-            records = np.frombuffer(log).reshape(-1, (nv + 1) * lanes)
-            S, T = records[:, :nv * lanes].reshape(-1, nv, lanes), records[:, nv * lanes:]
-            # A lane's own steps are its first rows; once arrived it takes empty steps.
-            if any(r[0] == hy.taylor_outcome.step_limit for r in res):
-                recorders = [StepRecorder() for _ in range(lanes)]
-                for j, rec in enumerate(recorders):
-                    rec.extend(T[:nsteps[j] + 1, j], S[:nsteps[j] + 1, :n, j])
-                bad = self.long_run(recorders, out, nsteps, progress)
-                if bad:
-                    return [], bad
-                step_t, step_states = [r.t for r in recorders], [r.states for r in recorders]
-            else:
-                by_lane_t, by_lane = T.T.copy(), S[:, :n, :].transpose(2, 0, 1).copy()
-                step_t = [by_lane_t[j, :nsteps[j] + 1] for j in range(lanes)]
-                step_states = [by_lane[j, :nsteps[j] + 1] for j in range(lanes)]
-            out[-1] = ta.state  # the last samples are the final states themselves
-        if len(times) < len(self.grid):
-            out = out[self.where]
-        states = out[:, :n, :].transpose(2, 0, 1).copy()
-        tau = out[:, n, :].T.copy() if ts.has_tau else [None] * lanes
-        return [(states[j], tau[j], step_t[j], step_states[j], int(nsteps[j])) for j in range(lanes)], []
-
-    def long_run(self, recorders: list[StepRecorder], out: np.ndarray, nsteps: np.ndarray,
-                 progress: ProgressCallback) -> list[int]:
-        """Go on to ``t_final`` in continuous-output segments (no Python per step); returns failed lanes."""
-        ta, times, n = self.ta, self.times, self.ts.n_state
-        segments, t_final = _Segments(len(self.ts.variables), ta.order, self.lanes), float(times[-1])
-        done = np.searchsorted(times, ta.time, side="right")
-        res = ta.propagate_res
-        while any(r[0] == hy.taylor_outcome.step_limit for r in res):
-            if not progress(float(np.mean(np.minimum(ta.time / t_final, 1.0)))):
-                raise IntegrationCancelled(f"cancelled at t = {ta.time.min():g}")
-            tic = time.perf_counter()
-            c_out, _ = ta.propagate_until(t_final, max_steps=segments.steps, c_output=True)
-            res = ta.propagate_res
-            bad = [j for j, r in enumerate(res) if r[0] not in _GOING]
-            if bad:
-                return bad
-            steps = np.array([r[3] for r in res])
-            nsteps += steps
-            if c_out is not None and steps.max() > 0:
-                # States after each step: the next steps' order-0 coefficients, then the current state.
-                ends = np.concatenate([c_out.tcs[1:, :n, 0, :], ta.state[None, :n, :]])
-                now = ta.time.copy()
-                upto = np.searchsorted(times, now, side="right")
-                wanted = upto - done
-                if wanted.max() > 0:  # one evaluation: each lane's times, padded with its current time
-                    k = np.arange(wanted.max())[:, None]
-                    at = np.where(k < wanted, times[np.minimum(done + k, len(times) - 1)], now)
-                    values = c_out(np.ascontiguousarray(at))
-                for j, rec in enumerate(recorders):
-                    rec.extend(c_out.times[1:steps[j] + 1, j], ends[:steps[j], :, j])
-                    if wanted[j] > 0:
-                        out[done[j]:upto[j], :, j] = values[:wanted[j], :, j]
-                done = np.maximum(done, upto)
-            segments.update(int(steps.max()), time.perf_counter() - tic)
-        return []
-
-
 def _integrate_scipy(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, grid: np.ndarray,
                      tol: float, progress: ProgressCallback | None) -> Trajectory:
     kernels = numeric(system)
@@ -566,6 +370,8 @@ def _integrate_scipy(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, gr
         x = y[:n]
         dx = kernels.rhs_single(x, p)
         return dx if tau_kernel is None else np.append(dx, tau_kernel(x[None, :], p)[0, 0])
+
+    from scipy.integrate import solve_ivp  # imported when used: ~1 s of every process's start otherwise
 
     y_start = y0 if tau_kernel is None else np.append(y0, 0.0)
     sol = solve_ivp(f, (0.0, t_final), y_start, method="DOP853", rtol=tol, atol=tol, dense_output=True)

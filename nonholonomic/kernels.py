@@ -2,20 +2,41 @@
 
 Every function takes states as an array of shape ``(n, dim)`` (rows are phase points, columns the
 flattened state symbols) and the parameter vector in the order of ``system.parameter_symbols``.
-Kernels are compiled once per system and process (``lru_cache``).
+Kernels are compiled once per system and process (``lru_cache``), and remembered across processes
+when a memo is installed (:mod:`nonholonomic.memo`: lambdify's common subexpression elimination is
+most of a worker's warm-up).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from functools import cached_property, lru_cache
+from typing import TypeVar
 
 import numpy as np
 import sympy as sp
 
+from nonholonomic import memo
 from nonholonomic.definition import MechanicalSystem
+from nonholonomic.numpy_function import lambdify_numpy
 
 VectorKernel = Callable[[np.ndarray, np.ndarray], np.ndarray]
+T = TypeVar("T")
+
+
+class Kernel:
+    """``f(X, p) -> (n, k)``: ``k`` expressions at ``n`` phase points (picklable when its function is)."""
+
+    __slots__ = ("fn",)
+
+    def __init__(self, fn: Callable[..., list[object]]) -> None:
+        self.fn = fn
+
+    def __call__(self, X: np.ndarray, p: np.ndarray) -> np.ndarray:
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        n = X.shape[0]
+        out = self.fn(*X.T, *np.asarray(p, dtype=float))
+        return np.stack([np.broadcast_to(np.asarray(o, dtype=float), (n,)) for o in out], axis=1)
 
 
 def vectorize(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> VectorKernel:
@@ -23,15 +44,7 @@ def vectorize(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> VectorKern
 
     ``args`` are the state symbols followed by the parameter symbols.
     """
-    fn = sp.lambdify(list(args), list(exprs), modules="numpy", cse=True)
-
-    def evaluate(X: np.ndarray, p: np.ndarray) -> np.ndarray:
-        X = np.atleast_2d(np.asarray(X, dtype=float))
-        n = X.shape[0]
-        out = fn(*X.T, *np.asarray(p, dtype=float))
-        return np.stack([np.broadcast_to(np.asarray(o, dtype=float), (n,)) for o in out], axis=1)
-
-    return evaluate
+    return Kernel(lambdify_numpy(args, exprs))
 
 
 class NumericSystem:
@@ -43,56 +56,76 @@ class NumericSystem:
         self._args = system.state_symbols + system.parameter_symbols
 
     @cached_property
+    def _definition_key(self) -> str | None:
+        """The memo's key of the system's definition (pickled once per process)."""
+        return memo.key_of("definition-of", self.system) if memo.installed() else None
+
+    def _kernel(self, name: str, compile_kernel: Callable[[], T]) -> T:
+        """``compile_kernel()``, remembered across processes as the kernel ``name`` of this definition."""
+        if self._definition_key is None:
+            return compile_kernel()
+        return memo.remember("kernel", (self._definition_key, name), compile_kernel)
+
+    @cached_property
     def rhs(self) -> VectorKernel:
-        return vectorize(self.system.rhs, self._args)
+        return self._kernel("rhs", lambda: vectorize(self.system.rhs, self._args))
 
     @cached_property
     def integrals(self) -> VectorKernel:
-        return vectorize([i.expression for i in self.system.integrals] or [sp.Integer(0)], self._args)
+        exprs = [i.expression for i in self.system.integrals] or [sp.Integer(0)]
+        return self._kernel("integrals", lambda: vectorize(exprs, self._args))
 
     @cached_property
     def integral_scales(self) -> VectorKernel:
-        return vectorize([i.scale for i in self.system.integrals] or [sp.Integer(1)], self._args)
+        exprs = [i.scale for i in self.system.integrals] or [sp.Integer(1)]
+        return self._kernel("integral_scales", lambda: vectorize(exprs, self._args))
 
     @cached_property
     def derived(self) -> dict[str, VectorKernel]:
-        return {d.name: vectorize(d.expression, self._args) for d in self.system.derived}
+        return self._kernel("derived", lambda: {d.name: vectorize(d.expression, self._args)
+                                                for d in self.system.derived})
 
     @cached_property
     def density(self) -> VectorKernel:
         """``ρ`` of the invariant measure (1 where none is claimed)."""
-        return vectorize([_claimed(self.system.measure.density)], self._args)
+        return self._kernel("density", lambda: vectorize([_claimed(self.system.measure.density)], self._args))
 
     @cached_property
     def time_density(self) -> VectorKernel:
         """``dτ/dt`` of the reduced time (only for systems that have one)."""
-        if self.system.reduced_time is None:
+        reduced_time = self.system.reduced_time
+        if reduced_time is None:
             raise AttributeError(f"{self.system.kind} has no reduced time")
-        return vectorize([self.system.reduced_time.density], self._args)
+        return self._kernel("time_density", lambda: vectorize([reduced_time.density], self._args))
 
     @cached_property
     def constraint_scales(self) -> VectorKernel:
-        return vectorize([c.scale for c in self.system.constraints] or [sp.Integer(1)], self._args)
+        exprs = [c.scale for c in self.system.constraints] or [sp.Integer(1)]
+        return self._kernel("constraint_scales", lambda: vectorize(exprs, self._args))
 
     @cached_property
     def projections(self) -> list[VectorKernel | None]:
         """Per constraint: the kernel giving its projected vector, or None if it has no projection."""
-        return [vectorize(c.projection.expression, self._args) if c.projection else None
-                for c in self.system.constraints]
+        return self._kernel("projections", lambda: [
+            vectorize(c.projection.expression, self._args) if c.projection else None
+            for c in self.system.constraints])
 
     @cached_property
     def divergence_terms(self) -> VectorKernel:
         """Columns ``∂(ρ f_i)/∂x_i``: their sum is ``div(ρ f)``, their absolute sum its natural scale."""
-        return vectorize(divergence_terms(self.system, _claimed(self.system.measure.density)), self._args)
+        density = _claimed(self.system.measure.density)
+        return self._kernel("divergence_terms", lambda: vectorize(divergence_terms(self.system, density), self._args))
 
     @cached_property
     def constraints(self) -> VectorKernel:
-        return vectorize([c.expression for c in self.system.constraints] or [sp.Integer(0)], self._args)
+        exprs = [c.expression for c in self.system.constraints] or [sp.Integer(0)]
+        return self._kernel("constraints", lambda: vectorize(exprs, self._args))
 
     def compile_all(self) -> None:
         """Compile every kernel now (a worker's warm-up)."""
         for name, attr in type(self).__dict__.items():
-            if isinstance(attr, cached_property) and (name != "time_density" or self.system.reduced_time):
+            if (isinstance(attr, cached_property) and not name.startswith("_")
+                    and (name != "time_density" or self.system.reduced_time)):
                 getattr(self, name)
 
     def rhs_single(self, y: np.ndarray, p: np.ndarray) -> np.ndarray:

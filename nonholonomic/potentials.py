@@ -34,6 +34,11 @@ class Potential:
     """``scale(variables)`` → the size of U's variation (e.g. |a||γ|), used to judge energy drift
     when U itself happens to vanish at the initial state."""
 
+    def memo_key(self) -> tuple[str, str, tuple[Parameter, ...]]:
+        """What identifies this potential for :mod:`nonholonomic.memo` (its closures do not pickle):
+        its kind, its formula (a user's text) and its parameters."""
+        return self.kind, self.formula, self.parameters
+
 
 def _vector(name: str, meaning: str, unit: str) -> tuple[sp.Matrix, Parameter]:
     v = vector_symbols(name)

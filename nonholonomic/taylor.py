@@ -38,7 +38,9 @@ import heyoka as hy
 import numpy as np
 import sympy as sp
 
+from nonholonomic import memo
 from nonholonomic.definition import MechanicalSystem
+from nonholonomic.numpy_function import lambdify_numpy
 
 #: A sum whose expansion has more monomials than this keeps the structure it was written in.
 MAX_EXPANDED_TERMS = 400
@@ -155,7 +157,18 @@ class TaylorSystem:
 
 @lru_cache(maxsize=64)
 def taylor_system(system: MechanicalSystem) -> TaylorSystem:
-    """The heyoka form of ``system`` (once per system and process)."""
+    """The heyoka form of ``system`` (once per system and process; remembered across processes when a
+    memo is installed, :mod:`nonholonomic.memo`)."""
+    if memo.installed():
+        definition = memo.key_of("definition-of", system)
+        form = memo.remember("taylor-form", definition, lambda: _taylor_form(system))
+    else:
+        form = _taylor_form(system)
+    return TaylorSystem(system=system, **form)
+
+
+def _taylor_form(system: MechanicalSystem) -> dict[str, object]:
+    """Every field of the :class:`TaylorSystem` of ``system`` but the system itself (it pickles)."""
     names = [str(s) for s in system.state_symbols] + (["tau"] if system.reduced_time else [])
     hvars = hy.make_vars(*names)
     if len(names) == 1:
@@ -164,13 +177,11 @@ def taylor_system(system: MechanicalSystem) -> TaylorSystem:
     state = dict(zip(system.state_symbols, hvars))
     best = _translate(exprs, state, _Parameters(system.parameter_symbols))
     derived = tuple(best.parameters.derived)
-    fn = (sp.lambdify(list(system.parameter_symbols), list(derived), modules="numpy", cse=True)
-          if derived else None)
-    return TaylorSystem(system=system, variables=tuple(hvars), rhs=tuple(best.expressions),
-                        n_state=system.dimension, has_tau=system.reduced_time is not None,
-                        n_pars=len(system.parameter_symbols) + len(derived), derived_parameters=derived,
-                        operations=best.operations, strategy=best.strategy, _derived=fn,
-                        _parameters=best.parameters.copy(frozen=True))
+    fn = lambdify_numpy(system.parameter_symbols, derived) if derived else None
+    return {"variables": tuple(hvars), "rhs": tuple(best.expressions), "n_state": system.dimension,
+            "has_tau": system.reduced_time is not None, "n_pars": len(system.parameter_symbols) + len(derived),
+            "derived_parameters": derived, "operations": best.operations, "strategy": best.strategy,
+            "_derived": fn, "_parameters": best.parameters.copy(frozen=True)}
 
 
 # --- parameters ------------------------------------------------------------------------------------

@@ -7,6 +7,20 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 
+class WarmUpState(BaseModel):
+    """Where the warm-up is: systems ready of ``total``, the one being prepared, and how many symbolic
+    results the memo on disk gave back or had to be derived (a first start derives them all)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    total: int
+    done: int
+    now: str | None = Field(None, description="the system being prepared")
+    read_back: int = Field(description="symbolic results read back from the memo on disk (workers/disk_memo.py)")
+    derived: int = Field(description="symbolic results derived and written to it")
+    seconds: float | None = Field(None, description="the warm-up's duration, once finished")
+
+
 class EmbeddedWorkers(BaseModel):
     """Embedded mode: the in-process job threads."""
 
@@ -14,6 +28,7 @@ class EmbeddedWorkers(BaseModel):
 
     threads: int
     warm: bool = Field(description="whether the kernels are compiled (warm-up done)")
+    warm_up: WarmUpState | None = None
 
 
 class QueueWorker(BaseModel):

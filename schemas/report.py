@@ -50,6 +50,17 @@ class ReportRow(BaseModel):
     seconds: float
 
 
+class ReportProvenance(BaseModel):
+    """When and with what the report was computed; ``cached``: this answer was read back from an
+    earlier run of the same code and libraries (``versions``), not computed again."""
+
+    at: str = Field(description="when it was computed (ISO 8601, UTC)")
+    seconds: float = Field(description="how long computing it took then")
+    versions: dict[str, str] = Field(description="the project's version, its code fingerprint and the libraries'")
+    project: dict[str, str | None] = Field(description="name, version and git commit of the build")
+    cached: bool
+
+
 class PaperReport(BaseModel):
     """The report: a row per claim and the count of each verdict."""
 
@@ -60,6 +71,7 @@ class PaperReport(BaseModel):
     rows: list[ReportRow]
     seconds: float
     verdicts: dict[str, str]
+    computed: ReportProvenance | None = None
 
 
 class ClaimList(BaseModel):

@@ -60,6 +60,13 @@ class Settings(BaseSettings):
                                      description="jobs and ensemble chunks waiting in the queue; beyond: 429")
     cors_origins: str = Field("", description="comma-separated origins allowed by CORS ('' : none, '*': any)")
     warm_up: bool = Field(True, description="compile the integrators when a worker (or embedded API) starts")
+    cache_dir: str | None = Field(None, description="folder of the symbolic results remembered between runs "
+                                  "(definitions, heyoka forms, kernels, proofs; workers/disk_memo.py); unset: "
+                                  "$XDG_CACHE_HOME/nonholonomic or ~/.cache/nonholonomic; 'off': none")
+    symbolic_prestart: bool = Field(True, description="start the symbolic pool's fork server (~3 s of CPU, in the "
+                                    "background) when the API starts; false: at the first request that needs it")
+    cache_max_mib: int = Field(512, ge=1, description="size of cache_dir beyond which its least recently used "
+                                                      "files are deleted (MiB)")
     idempotency_lease_s: float = Field(30.0, gt=0, description="seconds an Idempotency-Key stays 'in progress' "
                                        "unless the API serving it renews it (an API that died frees it then)")
     auth_failures_per_minute: int = Field(20, ge=0, description="requests with an unknown API key one client "

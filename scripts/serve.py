@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from _bootstrap import BIN, ROOT, ensure_installed, say
 
@@ -39,6 +40,11 @@ def main(argv: list[str]) -> None:
         env.pop("REDIS_URL", None)
         env.pop("NONHOLONOMIC_REDIS_URL", None)
         say("embedded mode: jobs run in this process (no Redis needed)")
+    memo = Path(env.get("NONHOLONOMIC_CACHE_DIR") or Path(env.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+                / "nonholonomic")
+    if env.get("NONHOLONOMIC_CACHE_DIR", "").lower() != "off" and not any(memo.glob("*.memo")):
+        say(f"first start: every system is derived and compiled once (about a minute on 2 cores; GET /health "
+            f"says how far), then kept in {memo} for the next starts")
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{args.port}"
     say(f"API on {base} (listening on {args.host}:{args.port}); docs at {base}/docs; Ctrl-C stops it")

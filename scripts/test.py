@@ -4,8 +4,10 @@
 PostgreSQL answers on 127.0.0.1:5432 (starting a cluster of the tests' own if not) and that a
 headless Chromium is there for the page tests (installing Debian's ``chromium`` if it is missing)
 and nginx for the slow-client tests (Debian's ``nginx-light``),
-then run the whole test suite. Extra arguments go to pytest (e.g. ``-k measure``).
-Screenshots and other artefacts of the run go to ``test-output/``."""
+then run the whole test suite in parallel (pytest-xdist: ``NONHOLONOMIC_TEST_WORKERS`` processes, default
+2, each taking whole files so that a module's server is started once). Extra arguments go to pytest
+(e.g. ``-k measure``; ``-n 0`` runs in one process). Screenshots and other artefacts of the run go to
+``test-output/``."""
 
 from __future__ import annotations
 
@@ -121,7 +123,18 @@ def main(argv: list[str]) -> int:
            "NONHOLONOMIC_REQUIRE_BROWSER": "1",
            "NONHOLONOMIC_TEST_OUTPUT": os.environ.get("NONHOLONOMIC_TEST_OUTPUT", str(ROOT / "test-output"))}
     os.chdir(ROOT)
-    return subprocess.run([str(PYTHON), "-m", "pytest", *argv], env=env).returncode
+    return subprocess.run([str(PYTHON), "-m", "pytest", *parallel(argv), *argv], env=env).returncode
+
+
+def parallel(argv: list[str]) -> list[str]:
+    """pytest-xdist's options unless the arguments choose their own: ``NONHOLONOMIC_TEST_WORKERS``
+    processes (default 2: the suite waits on servers and workers as much as it computes), a file per
+    process at a time, and the 15 slowest tests listed."""
+    if "no:xdist" in argv or any(a in ("-n", "--numprocesses", "--dist") or a.startswith(("-n", "--numprocesses="))
+                                 for a in argv):
+        return []
+    workers = os.environ.get("NONHOLONOMIC_TEST_WORKERS", "2")
+    return ["-n", workers, "--dist", "loadfile", "--durations", "15"]
 
 
 if __name__ == "__main__":

@@ -10,7 +10,9 @@ against every request's validation budget. The fork server pays it once, at the 
 from __future__ import annotations
 
 from nonholonomic.systems import SYSTEMS, ball_on_quadric, own_names
+from workers.disk_memo import install_from_settings
 
+install_from_settings()  # the children inherit it
 ball_on_quadric.check_reduction()
 for _kind in SYSTEMS:
     own_names(_kind)

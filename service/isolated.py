@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import threading
 import time
 from collections.abc import Callable
 from multiprocessing.connection import Connection
@@ -26,12 +27,21 @@ _CONTEXT.set_forkserver_preload(["nonholonomic.reducing_multiplier", "nonholonom
                                  "service.routes.symbolic", "service.validation", "service.fork_server_warm"])
 
 
-def start_fork_server() -> None:
-    """Start the fork server and wait for its preloaded imports and warm-up (a few seconds of CPU,
-    :mod:`service.fork_server_warm`), at the API's start-up: during the first symbolic requests and
-    validations it would take a core from them and from ``/health``.
+def start_fork_server(wait: bool = False) -> threading.Thread:
+    """Start the fork server (its preloaded imports and warm-up, :mod:`service.fork_server_warm`: about
+    3 s of CPU, most of it imports, with the memo on disk) in a thread, at the API's start-up, so that
+    the first symbolic request or validation does not pay for it. The API does not wait for it
+    (``wait``: the tests do); a request arriving earlier waits for the same start.
     A failure (e.g. an interpreter whose main module cannot be re-imported) is logged, not raised: the
     API serves everything else, and a symbolic request reports it."""
+    thread = threading.Thread(target=_start, daemon=True, name="nonholonomic-fork-server")
+    thread.start()
+    if wait:
+        thread.join()
+    return thread
+
+
+def _start() -> None:
     try:
         run_isolated(_nothing, (), 120.0)
     except Exception as exc:  # the API still starts

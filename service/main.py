@@ -24,6 +24,7 @@ from service.isolated import start_fork_server
 from service.limits import BodyLimit
 from service.routes import ensembles, health, jobs, maps, pages, report, symbolic, systems
 from service.security import SecurityHeaders
+from workers.disk_memo import install_disk_memo
 
 #: Where the pages' stylesheet and icon are served (``service/static``; no API key needed).
 STATIC_URL = "/static"
@@ -37,7 +38,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        start_fork_server()  # for the symbolic requests' child processes
+        install_disk_memo(chosen.cache_dir, chosen.cache_max_mib)  # symbolic results remembered between runs
+        if chosen.symbolic_prestart:
+            start_fork_server()  # for the symbolic requests' child processes (in the background)
         app.state.symbolic_pool = SymbolicPool(chosen.symbolic_workers, chosen.symbolic_queue)
         app.state.backend = make_backend(chosen)
         app.state.idempotency = idempotency_store(app.state.backend, chosen.job_ttl_s)

@@ -13,8 +13,11 @@ import pytest
 from hypothesis import settings
 
 # Embedded mode's job store: never the working directory's .nonholonomic/ (a module-scoped app uses
-# this folder; each test gets a fresh one below).
-os.environ.setdefault("NONHOLONOMIC_DATA_DIR", tempfile.mkdtemp(prefix="nonholonomic-tests-"))
+# this folder; each test gets a fresh one below), and one of its own for each pytest-xdist worker
+# (the workers inherit the controller's environment: a shared SQLite file would be migrated twice).
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER")
+if _WORKER or "NONHOLONOMIC_DATA_DIR" not in os.environ:
+    os.environ["NONHOLONOMIC_DATA_DIR"] = tempfile.mkdtemp(prefix=f"nonholonomic-tests-{_WORKER or 'main'}-")
 
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("dev", deadline=None, print_blob=True)
@@ -39,3 +42,24 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:  # ty
         terminalreporter.write_sep("-", f"{len(running)} symbolic computation(s) still running")
         for key in running:
             terminalreporter.write_line(str(key)[:200])
+
+
+#: The files that take longest (minutes, mostly waiting on the processes they start), run first: with
+#: pytest-xdist handing out whole files, a long file started last would be the whole suite's tail.
+LONGEST_FIRST = ("integration/test_faults.py", "integration/test_durability.py", "integration/test_partition.py",
+                 "integration/test_redis_outage.py", "integration/test_worker_soft_limit.py", "unit/test_report.py",
+                 "integration/test_processes.py", "integration/test_worker_recycling.py")
+
+
+def pytest_collection_modifyitems(config, items) -> None:  # type: ignore[no-untyped-def]
+    """Longest files first (:data:`LONGEST_FIRST`), then the other integration files, then the rest in
+    their order (a stable sort)."""
+
+    def rank(item) -> int:  # type: ignore[no-untyped-def]
+        path = item.nodeid.split("::")[0]
+        for i, name in enumerate(LONGEST_FIRST):
+            if path.endswith(name):
+                return i
+        return len(LONGEST_FIRST) + (0 if "/integration/" in path else 1)
+
+    items.sort(key=rank)

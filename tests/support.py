@@ -64,6 +64,8 @@ def _env(extra: Mapping[str, str]) -> dict[str, str]:
            if not k.startswith("NONHOLONOMIC_") and k not in ("REDIS_URL", "DATABASE_URL")}
     env["NONHOLONOMIC_DATA_DIR"] = tempfile.mkdtemp(prefix="nonholonomic-store-")
     env["NONHOLONOMIC_DATABASE_URL"] = TEST_DATABASE_URL if extra.get("REDIS_URL") else ""
+    # the suite starts ~60 APIs, most never asked a symbolic question: their fork servers start on demand
+    env["NONHOLONOMIC_SYMBOLIC_PRESTART"] = "false"
     env.update(extra)
     return env
 

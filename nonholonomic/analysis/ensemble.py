@@ -21,7 +21,7 @@ from nonholonomic.analysis.options import SectionOptions, SpectrumOptions
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import integral_evidence_batch
 from nonholonomic.initial_state import parameter_warnings
-from nonholonomic import integration
+from nonholonomic import integration_batch
 from nonholonomic.integration import ProgressCallback
 from nonholonomic.simulation import SimulationResult, evidence, phase
 
@@ -80,7 +80,7 @@ class MemberResult:
 def default_chunk_size(system: MechanicalSystem, t_final: float, *, poincare: SectionOptions | None = None,
                        lyapunov: SpectrumOptions | None = None, lanes: int | None = None) -> int:
     """Members per chunk for about :data:`CHUNK_SECONDS` of work, a multiple of ``lanes`` (by default
-    heyoka's SIMD batch size, the lanes :func:`~nonholonomic.integration.integrate_batch` fills)."""
+    heyoka's SIMD batch size, the lanes :func:`~nonholonomic.integration_batch.integrate_batch` fills)."""
     lanes = lanes or hy.recommended_simd_size()
     per_unit_time = SECONDS_PER_UNIT_TIME * (1 + SECTION_FACTOR * (poincare is not None))
     if lyapunov is not None:  # the orbit with its whole tangent matrix, a QR every interval
@@ -127,7 +127,7 @@ def run_chunk(system: MechanicalSystem, members: Sequence[Member], t_final: floa
     P = np.array([m.parameters for m in members], dtype=float)
     Y0 = np.array([m.initial_state for m in members], dtype=float)
     parts = 1 + (poincare is not None) + (lyapunov is not None)
-    trajectories = integration.integrate_batch(system, P, Y0, t_final, samples, tolerance=tolerance,
+    trajectories = integration_batch.integrate_batch(system, P, Y0, t_final, samples, tolerance=tolerance,
                                    progress=phase(progress, 0.0, 1.0 / parts))
     done = 1
     sections: list[Any] = [None] * len(members)

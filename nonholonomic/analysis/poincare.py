@@ -19,15 +19,18 @@ and process, and copied once per thread.
 
 The event time reaches Python rounded to a double, so the dense-output state is off the exact
 root by up to half an ulp of ``t`` (``|f|·ulp(t)/2``, ~1e-13 at t ~ 1000). One Newton step along
-the flow, done for all crossings at once with the numpy kernels,
+the flow, done for all crossings at once by the surface's compiled function,
 ``δ = −(S(x) − value)/(∇S·f)``, ``x ← x + f(x) δ``, ``t ← t + δ``, ``τ ← τ + ρ δ``, moves each point
 back onto the surface (``δ`` is accepted only while it is at the level of that rounding; a
 nearly tangent crossing keeps its unrefined point and a warning says so).
 
-``max_points`` stops the integration: the trajectory is propagated in segments (1 % of
-``t_final``, but at least 256 and at most 20 000 steps, and not much beyond where the crossing
-rate so far puts the ``max_points``-th crossing); after each one the crossings are counted and
-``progress`` is asked whether to go on. No Python callback runs at every step.
+``max_points`` stops the integration: the trajectory is propagated in segments of a number of
+steps (:func:`section`: 64 first, then at most 20 000 and not much beyond where the crossing rate
+so far puts the ``max_points``-th crossing, and with a ``progress`` to ask, about 1 % of
+``t_final`` but at least 256 steps; no step is cut short at a segment's end, so the steps are those
+of one uninterrupted propagation; :func:`section_batch`: segments of 1 % of ``t_final`` in time,
+in pieces of at most 20 000 steps); after each one the crossings are counted and ``progress`` is
+asked whether to go on. No Python callback runs at every step.
 
 The τ of a crossing is the integrated reduced time ``dτ = ρ dt`` (paper eq. 2604-5 for the ball).
 
@@ -39,7 +42,7 @@ Layout: this module is the front door (:func:`section`, :func:`section_batch`: t
 scalar and batch, with its segment lengths and stall checks); every name below is importable from here.
 
 * :mod:`.poincare_surface`: parsing a surface (:func:`parse_surface`, :class:`SurfaceError`), its
-  names and its numpy kernels, :func:`surface_scale_of`;
+  names and its compiled kernels, :func:`surface_scale_of`;
 * :mod:`.poincare_request`: the checks of a request's fields (:data:`DIRECTIONS`,
   :data:`MAX_POINTS_LIMIT`);
 * :mod:`.poincare_events`: the compiled integrators with the event, once per process and copied
@@ -80,6 +83,7 @@ from nonholonomic.integration import (
     IntegrationError,
     ProgressCallback,
 )
+from nonholonomic.taylor import TaylorSystem
 
 __all__ = [
     "DIRECTIONS",
@@ -100,10 +104,12 @@ SEGMENT_MIN_STEPS = 256
 SEGMENT_MAX_STEPS = 20_000
 #: ... and otherwise this fraction of ``t_final``.
 SEGMENT_FRACTION = 0.01
+#: The first segment of :func:`section` (steps): its step size and crossing rate size the next ones.
+FIRST_SEGMENT_STEPS = 64
 
 
 def _next_segment(t_final: float, t_now: float, steps: float, crossings: int, remaining: int) -> float:
-    """Length of the next propagation segment (see the module docstring)."""
+    """Length of the next propagation segment of :func:`section_batch` (see the module docstring)."""
     mean_h = t_now / steps if steps > 0 else t_final
     seg = min(max(SEGMENT_FRACTION * t_final, SEGMENT_MIN_STEPS * mean_h), SEGMENT_MAX_STEPS * mean_h)
     if crossings > 0:  # do not run far past the max_points-th crossing
@@ -111,45 +117,53 @@ def _next_segment(t_final: float, t_now: float, steps: float, crossings: int, re
     return seg
 
 
+def _next_steps(t_final: float, t_now: float, steps: int, crossings: int, remaining: int, reporting: bool) -> int:
+    """Steps of the next segment of :func:`section` (``steps``: the steps so far): at most
+    :data:`SEGMENT_MAX_STEPS`; not much beyond where the crossing rate so far puts the ``max_points``-th
+    crossing (before the first crossing, as many steps as so far); with a ``progress`` to call, about
+    :data:`SEGMENT_FRACTION` of ``t_final`` at the mean step so far, at least :data:`SEGMENT_MIN_STEPS`."""
+    seg = 1.25 * remaining * steps / crossings if crossings > 0 else float(steps)
+    if reporting and t_now > 0:
+        seg = min(seg, max(SEGMENT_FRACTION * t_final * steps / t_now, SEGMENT_MIN_STEPS))
+    return int(min(max(seg, SEGMENT_MIN_STEPS / 4), SEGMENT_MAX_STEPS))
+
+
 _GOOD = (hy.taylor_outcome.time_limit, hy.taylor_outcome.success)
+_GOING = (hy.taylor_outcome.time_limit, hy.taylor_outcome.step_limit)
+
+#: Runtime parameter vectors computed lately, by (TaylorSystem identity, parameter bytes).
+_runtime_by_key: dict[tuple[int, bytes], tuple[TaylorSystem, np.ndarray]] = {}
 
 
-#: A piece of SEGMENT_MAX_STEPS steps that gains less than this many ``eps·max(|t|, 1)`` per step has stalled.
+def _runtime_parameters(ts: TaylorSystem, p: np.ndarray) -> np.ndarray:
+    """``ts.runtime_parameters(p)``, remembered for the parameter vectors used lately: computing the
+    derived parameters costs tens of microseconds, a large share of a short section, and a service
+    asks for sections of the same system with the same parameters again and again."""
+    key = (id(ts), p.tobytes())
+    hit = _runtime_by_key.get(key)
+    if hit is None or hit[0] is not ts:
+        if len(_runtime_by_key) >= 256:
+            _runtime_by_key.clear()
+        runtime = ts.runtime_parameters(p)
+        runtime.flags.writeable = False  # shared by every call with these parameters
+        hit = _runtime_by_key[key] = (ts, runtime)
+    return hit[1]
+
+
+#: A piece of steps that gains less than this many ``eps·max(|t|, 1)`` per step has stalled.
 STALL_STEP_ULPS = 1024.0
 
 
-def _stalled_at(before: float, after: float) -> bool:
-    """Whether a piece of :data:`SEGMENT_MAX_STEPS` steps from ``before`` to ``after`` stalled: steps at the
-    rounding of ``t`` (an event function not finite or not smooth where the orbit is: heyoka's steps
-    shrink to nothing and never get past it)."""
-    return after - before <= SEGMENT_MAX_STEPS * STALL_STEP_ULPS * MACHINE_EPSILON * max(abs(after), 1.0)
+def _stalled_at(before: float, after: float, steps: int = SEGMENT_MAX_STEPS) -> bool:
+    """Whether a piece of ``steps`` steps from ``before`` to ``after`` stalled: steps at the rounding of ``t``
+    (an event function not finite or not smooth where the orbit is: heyoka's steps shrink to nothing and
+    never get past it)."""
+    return after - before <= steps * STALL_STEP_ULPS * MACHINE_EPSILON * max(abs(after), 1.0)
 
 
 def _stalled(t: float) -> str:
     return (f"heyoka's steps shrank to nothing at t = {t:g}: the surface is not finite or not smooth where the "
             "orbit meets it (e.g. sqrt or a fractional power at 0), so its crossings cannot be located")
-
-
-def _propagate(ta: hy.taylor_adaptive, t_next: float, t_final: float,
-               progress: ProgressCallback | None) -> tuple[hy.taylor_outcome, float, int]:
-    """``propagate_until(t_next)`` in pieces of at most :data:`SEGMENT_MAX_STEPS` steps, asking ``progress``
-    between them (a cancellation or a time limit acts within one piece). Returns the outcome, the largest
-    step and the steps taken. An event function that is not finite at the orbit makes heyoka take empty
-    steps forever: a piece that gains (next to) no time raises :class:`IntegrationError`."""
-    steps, max_h = 0, 0.0
-    while True:
-        before = ta.time
-        outcome, _, piece_max_h, nsteps, _, _ = ta.propagate_until(t_next, max_steps=SEGMENT_MAX_STEPS)
-        steps += nsteps
-        if math.isfinite(piece_max_h):
-            max_h = max(max_h, abs(piece_max_h))
-        if outcome != hy.taylor_outcome.step_limit:
-            return outcome, max_h, steps
-        if _stalled_at(before, ta.time):
-            raise IntegrationError(_stalled(ta.time))
-        if progress is not None and not progress(min(ta.time / t_final, 1.0)):
-            raise IntegrationCancelled(f"cancelled at t = {ta.time:g}")
-
 
 
 # --------------------------------------------------------------------------------------------------
@@ -210,34 +224,43 @@ def section(
     n_vars = len(ts.variables)
 
     start = time.perf_counter()
+    runtime = _runtime_parameters(ts, p)
     ta.time = 0.0
-    ta.state[:] = ts.initial(y0)
-    ta.pars[: ts.n_pars] = ts.runtime_parameters(p)
+    ta.state[: ts.n_state] = y0
+    ta.state[ts.n_state:] = 0.0  # τ
+    ta.pars[: ts.n_pars] = runtime
     ta.pars[ts.n_pars] = req.value
     crossings.reset(n_vars, req.max_points)
-    steps, max_h, t_now = 0, 0.0, 0.0
+    steps, iterations, max_h = 0, 0, 0.0
     stopped_early = False
-    seg = SEGMENT_FRACTION * req.t_final
+    # Segments of a number of steps (no step cut short at their ends: the steps are those of one
+    # uninterrupted propagation), each one propagate_until call, with the checks between them.
+    # the first segment: short with a progress to ask; else as long as max_points crossings may need
+    seg = FIRST_SEGMENT_STEPS if progress is not None else _next_steps(req.t_final, 0.0, 1, 1, req.max_points, False)
     while True:
-        t_next = req.t_final if t_now + 1.001 * seg >= req.t_final else t_now + seg
-        outcome, seg_max_h, nsteps = _propagate(ta, t_next, req.t_final, progress)
+        before = ta.time
+        outcome, _, seg_max_h, nsteps, _, _ = ta.propagate_until(req.t_final, max_steps=seg)
         steps += nsteps
-        max_h = max(max_h, abs(seg_max_h)) if math.isfinite(seg_max_h) else max_h
-        if outcome != hy.taylor_outcome.time_limit:
-            raise IntegrationError(f"heyoka stopped between t = {t_now:g} and {t_next:g} with outcome "
-                                   f"{outcome.name}")
-        t_now = t_next
-        if crossings.count >= req.max_points and (t_now < req.t_final or crossings.seen > crossings.count):
+        iterations += seg  # a segment cut by its step limit made seg iterations (empty steps are not counted)
+        if math.isfinite(seg_max_h):
+            max_h = max(max_h, abs(seg_max_h))
+        if outcome not in _GOING:
+            raise IntegrationError(f"heyoka stopped at t = {ta.time:g} with outcome {outcome.name}")
+        t_now = ta.time
+        reached = outcome == hy.taylor_outcome.time_limit
+        if crossings.count >= req.max_points and (not reached or crossings.seen > crossings.count):
             stopped_early = True
-        done = stopped_early or t_now >= req.t_final
-        if progress is not None and not progress(t_now / req.t_final) and not done:
+        done = stopped_early or reached
+        # an event function not finite or not smooth at the orbit: heyoka takes empty steps forever
+        if not done and seg >= SEGMENT_MIN_STEPS and _stalled_at(before, t_now, seg):
+            raise IntegrationError(_stalled(t_now))
+        if progress is not None and not progress(min(t_now / req.t_final, 1.0)) and not done:
             raise IntegrationCancelled(f"cancelled at t = {t_now:g}")
         if done:
             break
-        seg = _next_segment(req.t_final, t_now, steps, crossings.seen, req.max_points - crossings.count)
-    count = crossings.count
-    return _finish(req, p, y0, crossings.t[:count].copy(), crossings.x[:count].copy(), max_h, stopped_early,
-                   steps, start)
+        seg = _next_steps(req.t_final, t_now, iterations, crossings.seen, req.max_points - crossings.count,
+                          progress is not None)
+    return _finish(req, runtime, y0, *crossings.arrays(), max_h, stopped_early, steps, start)
 
 
 def section_batch(
@@ -394,6 +417,6 @@ def _run_batch(req: _Request, ta: hy.taylor_adaptive_batch, recorder: _BatchCros
             out.append(failed[i])
             continue
         lane = recorder.lanes[i]
-        out.append(_finish(req, P[i], Y[i], lane.t[: lane.count].copy(), lane.x[: lane.count].copy(), max_h[i],
-                           i in early_at, int(steps[i]), start, share))
+        out.append(_finish(req, pars[: ts.n_pars, i], Y[i], *lane.arrays(), max_h[i], i in early_at, int(steps[i]),
+                           start, share))
     return out

@@ -34,32 +34,37 @@ _HEYOKA_DIRECTION = {
 
 
 class _Crossings:
-    """nt_event callback of the scalar integrator: the dense-output state at each crossing."""
+    """nt_event callback of the scalar integrator: the time and the dense-output state at each crossing,
+    up to ``capacity`` of them (``seen`` counts every one). The states are logged as raw bytes and the
+    times in a list (cheaper per crossing than writing rows of arrays); :meth:`arrays` returns both."""
 
     def __init__(self) -> None:
         self.reset(0, 0)
 
     def reset(self, n_vars: int, capacity: int) -> None:
-        size = min(capacity, 256)
-        self.t, self.x = np.empty(size), np.empty((size, n_vars))
-        self.count, self.seen, self.capacity = 0, 0, capacity
+        self.n_vars, self.capacity = n_vars, capacity
+        self.count, self.seen = 0, 0
+        self.t: list[float] = []
+        self.log = bytearray()
 
-    def _grow(self) -> None:
-        size = min(2 * len(self.t) + 1, self.capacity)
-        self.t = np.resize(self.t, size)
-        self.x = np.concatenate([self.x, np.empty((size - len(self.x), self.x.shape[1]))])
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """The recorded times, shape ``(count,)``, and states, shape ``(count, n_vars)`` (copies), in time order."""
+        t, x = np.array(self.t, dtype=float), np.frombuffer(bytes(self.log)).reshape(-1, self.n_vars)
+        if any(b < a for a, b in zip(self.t, self.t[1:])):  # heyoka reports a step's crossings in time order
+            order = np.argsort(t, kind="stable")
+            t, x = t[order], x[order]
+        return t, x
+
+    def record(self, t: float, state: np.ndarray) -> None:
+        """Keep one crossing (below ``capacity``)."""
+        self.seen += 1
+        if self.count < self.capacity:
+            self.log += state.data  # the raw bytes (a C-contiguous array)
+            self.t.append(t)
+            self.count += 1
 
     def __call__(self, ta: hy.taylor_adaptive, t: float, d_sgn: int) -> None:
-        self.seen += 1
-        k = self.count
-        if k >= self.capacity:
-            return
-        if k == len(self.t):
-            self._grow()
-        ta.update_d_output(t)
-        self.t[k] = t
-        self.x[k] = ta.d_output
-        self.count = k + 1
+        self.record(t, ta.update_d_output(t))  # the dense output at t (a view of the integrator's buffer)
 
 
 class _BatchCrossings:
@@ -74,18 +79,12 @@ class _BatchCrossings:
 
     def __call__(self, ta: hy.taylor_adaptive_batch, t: float, d_sgn: int, idx: int) -> None:
         lane = self.lanes[idx]
-        lane.seen += 1
-        k = lane.count
-        if k >= lane.capacity:
+        if lane.count >= lane.capacity:
+            lane.seen += 1
             return
-        if k == len(lane.t):
-            lane._grow()
         times = np.array(ta.time)  # a copy: the other lanes' times stay untouched
         times[idx] = t
-        ta.update_d_output(times)
-        lane.t[k] = t
-        lane.x[k] = ta.d_output[:, idx]
-        lane.count = k + 1
+        lane.record(t, np.ascontiguousarray(ta.update_d_output(times)[:, idx]))
 
 
 @lru_cache(maxsize=16)

@@ -45,12 +45,56 @@ class _Request:
         return self.prep.expr
 
 
+#: What :func:`_prepare` made of (system, surface text) lately, by the system's identity.
+_prepared_by_id: dict[tuple[int, str], tuple[MechanicalSystem, _Prepared]] = {}
+
+
+def _prepared(system: MechanicalSystem, text: str) -> _Prepared:
+    """:func:`_prepare`, looked up by the system's identity: its cache hashes the whole symbolic
+    definition, which costs more than the rest of a short section's checks."""
+    hit = _prepared_by_id.get((id(system), text))
+    if hit is None or hit[0] is not system:
+        if len(_prepared_by_id) >= 256:
+            _prepared_by_id.clear()
+        hit = _prepared_by_id[(id(system), text)] = (system, _prepare(system, text))
+    return hit[1]
+
+
+#: Requests validated lately, by their arguments (the system by identity): a section asked again with the
+#: same fields (a service's sections of one system, an ensemble's members) skips the checks.
+_validated: dict[tuple[object, ...], tuple[MechanicalSystem, _Request]] = {}
+
+
 def _validate(system: MechanicalSystem, surface: str, value: float, direction: str,
               coordinates: Sequence[str] | None, max_points: int, t_final: float,
               tolerance: float | None) -> _Request:
+    """The checked request (see :func:`_check`), remembered for the arguments used lately."""
+    key: tuple[object, ...] | None = None
+    hit = None
+    if coordinates is None or type(coordinates) in (list, tuple):
+        try:
+            key = (id(system), surface, value, direction, coordinates and tuple(coordinates), max_points, t_final,
+                   tolerance)
+            hit = _validated.get(key)
+        except TypeError:  # unhashable arguments: checked (and refused) below
+            key = None
+    if hit is not None and hit[0] is system and type(max_points) is int:
+        return hit[1]
+    req = _check(system, surface, value, direction, coordinates, max_points, t_final, tolerance)
+    if key is not None:
+        if len(_validated) >= 256:
+            _validated.clear()
+        _validated[key] = (system, req)
+    return req
+
+
+def _check(system: MechanicalSystem, surface: str, value: float, direction: str,
+           coordinates: Sequence[str] | None, max_points: int, t_final: float,
+           tolerance: float | None) -> _Request:
+    """Every field of a section request checked (:class:`SurfaceError` names the refused one)."""
     if not isinstance(surface, str):
         raise SurfaceError("surface", f"must be a string, got {type(surface).__name__}")
-    prep = _prepare(system, surface)
+    prep = _prepared(system, surface)
     try:
         value = float(value)
     except (TypeError, ValueError):
@@ -90,7 +134,7 @@ def _check_arrays(system: MechanicalSystem, parameters: np.ndarray, states: np.n
         raise SurfaceError("parameters", f"needs {n_par} values per member, got shape {parameters.shape}")
     if states.shape[-1] != system.dimension:
         raise SurfaceError("initial_state", f"needs {system.dimension} components, got shape {states.shape}")
-    if not np.all(np.isfinite(parameters)):
+    if not np.isfinite(parameters).all():
         raise SurfaceError("parameters", "non-finite value")
-    if not np.all(np.isfinite(states)):
+    if not np.isfinite(states).all():
         raise SurfaceError("initial_state", "non-finite component")

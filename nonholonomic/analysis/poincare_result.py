@@ -2,7 +2,7 @@
 
 The event time reaches Python rounded to a double, so the dense-output state is off the exact
 root by up to half an ulp of ``t`` (``|f|·ulp(t)/2``, ~1e-13 at t ~ 1000). One Newton step along
-the flow, done for all crossings at once with the numpy kernels,
+the flow, done for all crossings at once by the surface's compiled function,
 ``δ = −(S(x) − value)/(∇S·f)``, ``x ← x + f(x) δ``, ``t ← t + δ``, ``τ ← τ + ρ δ``, moves each point
 back onto the surface (``δ`` is accepted only while it is at the level of that rounding; a
 nearly tangent crossing keeps its unrefined point and a warning says so).
@@ -27,6 +27,7 @@ from nonholonomic.integration import MACHINE_EPSILON
 
 #: The Newton correction of a crossing time is accepted up to this many ``eps·max(|t|, h_max)``.
 NEWTON_BOUND = 64.0
+_BOUND = NEWTON_BOUND * MACHINE_EPSILON
 
 
 @dataclass(frozen=True)
@@ -83,65 +84,67 @@ class Section:
 # Post-processing: Newton step onto the surface, points, coordinates, residual, drift
 # --------------------------------------------------------------------------------------------------
 
-def _finish(req: _Request, p: np.ndarray, y0: np.ndarray, t: np.ndarray, raw: np.ndarray, max_h: float,
+def _finish(req: _Request, runtime: np.ndarray, y0: np.ndarray, t: np.ndarray, raw: np.ndarray, max_h: float,
             stopped_early: bool, steps: int, start: float, wall_share: float = 1.0) -> Section:
+    """The :class:`Section` of the crossings ``t, raw`` (rows: the integrator's state at each) from
+    ``y0``; ``runtime``: the member's runtime parameters (:meth:`TaylorSystem.runtime_parameters`)."""
     system = req.system
-    n = system.dimension
     kernels = req.prep.kernels
-    order = np.argsort(t, kind="stable")
-    t, raw = t[order], raw[order]
-    x = raw[:, :n].copy()
-    tau = raw[:, n].copy() if system.reduced_time is not None else None
+    n = kernels.n
     warnings: list[str] = []
 
+    x = raw[:, :n]
+    tau = raw[:, n] if kernels.has_tau else None
     if len(t):
         # One Newton step along the flow: undo the rounding of the event time to a double.
-        columns = kernels.newton(x, p)
-        f = columns[:, 1 + n:1 + 2 * n]
-        g = columns[:, 0] - req.value
-        dg = np.sum(columns[:, 1:1 + n] * f, axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            delta = -g / dg
-        bound = NEWTON_BOUND * MACHINE_EPSILON * np.maximum(np.abs(t), max_h)
-        ok = np.isfinite(delta) & (np.abs(delta) <= bound)
-        delta = np.where(ok, delta, 0.0)
-        if tau is not None:
-            tau = tau + columns[:, 1 + 2 * n] * delta
-        x = x + f * delta[:, None]
-        t = t + delta
-        if not np.all(ok):
+        rows = kernels.evaluate(x, runtime, req.value)
+        delta = rows[kernels.delta]
+        size = np.abs(delta)
+        # accepted up to _BOUND·max(t, max_h) (t >= 0): all of them when the largest is within _BOUND·max_h
+        ok = size.max() <= _BOUND * max_h or (size <= _BOUND * np.maximum(t, max_h)).all()  # False if not finite
+        if not ok:  # nearly tangent crossings keep their points
+            ok = size <= _BOUND * np.maximum(t, max_h)
+            delta[~ok] = 0.0
             warnings.append(f"{int(np.sum(~ok))} crossing(s) nearly tangent to the surface (dS/dt ~ 0): their "
                             "points are the integrator's event points, not refined onto the surface")
+        x = x + rows[kernels.flow].T * delta[:, None]
+        t = t + delta
+        if tau is not None:
+            tau = tau + rows[kernels.density] * delta
     else:
+        x = x.copy()
         warnings.append(f"no crossing of {req.text!r} = {req.value:g} ({req.direction}) in 0 <= t <= "
                         f"{req.t_final:g}")
     if stopped_early:
         warnings.append(f"max_points = {req.max_points} reached at t = {t[-1]:.9g}; the integration stopped "
                         f"there instead of at t_final = {req.t_final:g}")
 
-    # Everything reported, evaluated at the initial state (row 0) and the points in one kernel call.
-    report = kernels.report(np.vstack([y0[None, :], x]), p)
-    at_points = report[1:]
-    points: dict[str, np.ndarray] = {vec.name: x[:, cols].copy() for vec, cols in zip(system.state, kernels.slices)}
-    for name, cols in kernels.derived:
-        points[name] = at_points[:, cols].copy()
-    coordinates = np.stack([points[vec][:, i] for vec, i in (req.prep.locate[c] for c in req.coordinates)], axis=1)
+    # Everything reported, evaluated at the initial state (column 0) and the points in one call.
+    report = kernels.evaluate(np.vstack([y0[None, :], x]), runtime, req.value)
+    points: dict[str, np.ndarray] = {vec.name: x[:, cols] for vec, cols in zip(system.state, kernels.slices)}
+    for name, rows in kernels.derived:
+        points[name] = report[rows, 1:].T
+    coordinates = np.empty((len(t), 2))
+    for j, name in enumerate(req.coordinates):
+        vec, i = req.prep.locate[name]
+        coordinates[:, j] = points[vec][:, i]
 
-    scale = _scale(kernels, x, at_points[:, 1:1 + n], req.value)
-    residual = float(np.max(np.abs(at_points[:, 0] - req.value)) / scale) if len(t) else 0.0
+    scale = _scale(report[kernels.natural_scale, 1:], req.value)
+    residual = float(np.abs(report[kernels.residual, 1:]).max()) / scale if len(t) else 0.0
 
     drift: dict[str, float] = {}
     if system.integrals:
-        values = report[:, kernels.integrals]
-        reference = np.maximum(np.abs(values[0]), np.max(np.abs(report[:, kernels.integral_scales]), axis=0))
-        reference = np.where(reference > 0, reference, 1.0)
-        rel = np.max(np.abs(values - values[0]), axis=0) / reference
-        drift = {claim.name: float(rel[i]) for i, claim in enumerate(system.integrals)}
+        values = report[kernels.integrals]
+        deviation = np.abs(values - values[:, :1]).max(axis=1).tolist()
+        natural = np.maximum(np.abs(values[:, 0]), np.abs(report[kernels.integral_scales]).max(axis=1)).tolist()
+        drift = {claim.name: d / (r if r > 0 else 1.0) for claim, d, r in zip(system.integrals, deviation, natural)}
 
-    return Section(
+    section = object.__new__(Section)  # every field set at once (the frozen dataclass sets them one by one)
+    section.__dict__.update(
         surface=req.text, value=req.value, direction=req.direction, t=t, tau=tau, points=points,
         coordinate_names=req.coordinates, coordinates=coordinates, surface_residual_max=residual,
         surface_scale=scale, integral_drift_max=drift, stopped_early=stopped_early, warnings=tuple(warnings),
         steps=int(steps), wall_time_s=(time.perf_counter() - start) * wall_share, t_final=req.t_final,
         tolerance=req.tolerance,
     )
+    return section

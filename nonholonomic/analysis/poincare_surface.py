@@ -7,9 +7,11 @@ possibly using the system's parameters (``I1``, ``D`` ...). Derived components (
 every surface is a function of the integrated variables. A refused request field raises
 :class:`SurfaceError`.
 
-The numpy kernels (``S``, ``∇S``, the flow, ρ, the derived vectors, the first integrals) serve the
-Newton step onto the surface and the measures of :mod:`.poincare_result`; the surface's scale is
-:func:`surface_scale_of`. Part of :mod:`.poincare` (the front door), where every name is importable.
+One heyoka compiled function (the Newton step onto the surface, the flow, ``S``, the derived
+vectors, the first integrals and their scales, translated as the integrator's right-hand side is)
+serves the post-processing of :mod:`.poincare_result`, all the points in one call;
+the surface's scale is :func:`surface_scale_of`. Part of :mod:`.poincare` (the front door), where
+every name is importable.
 """
 
 from __future__ import annotations
@@ -20,12 +22,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
+import heyoka as hy
 import numpy as np
 import sympy as sp
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.expressions import ExpressionError, integrable, parse_expression
-from nonholonomic.kernels import VectorKernel
 from nonholonomic.taylor import TaylorSystem, taylor_system
 
 _NOT_SMOOTH = re.compile(r"\b(abs|sign)\s*\(")
@@ -153,61 +155,78 @@ def parse_surface(system: MechanicalSystem, text: str) -> sp.Expr:
     return _parse_surface(system, text)
 
 
-def _vectorize(exprs: Sequence[sp.Expr], args: Sequence[sp.Symbol]) -> VectorKernel:
-    """``f(X, p) -> (n, len(exprs))`` like :func:`nonholonomic.kernels.vectorize`, writing the columns
-    into one array (no per-column broadcast: the post-processing of a short section stays cheap)."""
-    fn = sp.lambdify(list(args), list(exprs), modules="numpy", cse=True)
-    width = len(exprs)
-
-    def evaluate(X: np.ndarray, p: np.ndarray) -> np.ndarray:
-        out = np.empty((len(X), width))
-        for j, column in enumerate(fn(*X.T, *p)):
-            out[:, j] = column
-        return out
-
-    return evaluate
-
-
 @dataclass(frozen=True, eq=False)
 class _SurfaceKernels:
-    """The numpy kernels of one (system, surface), each one ``lambdify`` with common subexpressions.
-
-    ``newton(X, p)`` columns: ``S``, ``∇S`` (n), ``f`` (n), then ``ρ`` if the system has a reduced time.
-    ``report(X, p)`` columns: ``S``, ``∇S`` (n), the derived vectors' components, the integrals, their
-    scales. ``vector_of[i]`` is the state vector holding component ``i``; ``slices`` the vectors' columns.
+    """One heyoka compiled function of the state for one (system, surface): :meth:`evaluate` gives, at
+    many points in one call, one row per quantity: the Newton step onto the surface
+    ``δ = (value − S) / (dS/dt)`` (``dS/dt = ∇S·f``), the flow ``f`` (n), ``ρ`` if the system has a
+    reduced time, ``S − value``, the derived vectors' components, the integrals, their scales and the
+    surface's natural scale ``Σ_i |∂S/∂x_i| · |v(i)|`` (see :func:`surface_scale_of`). The parameters
+    are the system's runtime parameter vector (:meth:`~nonholonomic.taylor.TaylorSystem.runtime_parameters`),
+    then ``value``; the expressions are the symbolic ones, translated as the integrator's right-hand
+    side is (:mod:`nonholonomic.taylor`). ``slices`` are the state vectors' columns.
     """
 
     n: int
-    newton: VectorKernel
-    report: VectorKernel
+    has_tau: bool
+    cfunc: hy.cfunc
     derived: tuple[tuple[str, slice], ...]
     integrals: slice
     integral_scales: slice
-    vector_of: np.ndarray
+    natural_scale: int
     slices: tuple[slice, ...]
+
+    #: Row of δ.
+    delta = 0
+
+    @property
+    def flow(self) -> slice:
+        return slice(1, 1 + self.n)
+
+    @property
+    def density(self) -> int:
+        """Row of ρ (systems with a reduced time)."""
+        return 1 + self.n
+
+    @property
+    def residual(self) -> int:
+        """Row of ``S − value``."""
+        return 1 + self.n + self.has_tau
+
+    def evaluate(self, X: np.ndarray, runtime: np.ndarray, value: float) -> np.ndarray:
+        """Every row at the states ``X`` (one per row; parameters: ``runtime``, then ``value``)."""
+        pars = np.empty((self.cfunc.nparams, len(X)))
+        pars[:-1] = runtime[: self.cfunc.nparams - 1, None]
+        pars[-1] = value
+        return self.cfunc(np.ascontiguousarray(X.T), pars=pars)
 
 
 @lru_cache(maxsize=64)
 def _surface_kernels(system: MechanicalSystem, expr: sp.Expr) -> _SurfaceKernels:
-    args = system.state_symbols + system.parameter_symbols
-    n = system.dimension
-    slices, vector_of, start = [], [], 0
-    for k, vec in enumerate(system.state):
+    ts = taylor_system(system)
+    n, has_tau = system.dimension, system.reduced_time is not None
+    slices, norm_of, start = [], [], 0
+    for vec in system.state:
         slices.append(slice(start, start + len(vec.symbols)))
-        vector_of += [k] * len(vec.symbols)
+        norm_of += [sp.sqrt(sum(s**2 for s in vec.symbols))] * len(vec.symbols)
         start += len(vec.symbols)
-    head = [expr] + [sp.diff(expr, s) for s in system.state_symbols]
-    tau = [system.reduced_time.density] if system.reduced_time is not None else []
-    derived, column, components = [], 1 + n, []
+    gradient = [sp.diff(expr, s) for s in system.state_symbols]
+    rows = [expr, sum(d * f for d, f in zip(gradient, system.rhs))] + list(system.rhs)
+    rows += [system.reduced_time.density] if has_tau else []
+    derived = []
     for vec in system.derived:
-        derived.append((vec.name, slice(column, column + len(vec.expression))))
-        components += list(vec.expression)
-        column += len(vec.expression)
-    k = len(system.integrals)
-    report = head + components + [i.expression for i in system.integrals] + [i.scale for i in system.integrals]
-    return _SurfaceKernels(n=n, newton=_vectorize(head + list(system.rhs) + tau, args), report=_vectorize(report, args),
-                           derived=tuple(derived), integrals=slice(column, column + k),
-                           integral_scales=slice(column + k, column + 2 * k), vector_of=np.asarray(vector_of),
+        derived.append((vec.name, slice(len(rows), len(rows) + len(vec.expression))))
+        rows += list(vec.expression)
+    k, first = len(system.integrals), len(rows)
+    rows += [i.expression for i in system.integrals] + [i.scale for i in system.integrals]
+    rows.append(sum(sp.Abs(d) * norm for d, norm in zip(gradient, norm_of)))
+    S, slope, *rest = ts.expressions([_heyoka_ready(sp.sympify(r)) for r in rows])
+    value = hy.par[ts.n_pars]
+    # rows: δ, f, ρ, then S − value where S was (the rest keep their places)
+    outputs = [(value - S) / slope, *rest[: n + has_tau], S - value, *rest[n + has_tau:]]
+    return _SurfaceKernels(n=n, has_tau=has_tau, cfunc=hy.cfunc(outputs, list(ts.variables[:n])),
+                           derived=tuple(derived), integrals=slice(first, first + k),
+                           integral_scales=slice(first + k, first + 2 * k), natural_scale=len(rows) - 1,
                            slices=tuple(slices))
 
 
@@ -236,13 +255,13 @@ def _prepare(system: MechanicalSystem, text: str) -> _Prepared:
                      tuple(name for name, _ in _surface_names(system)), locate, default_coordinates(system))
 
 
-def _scale(kernels: _SurfaceKernels, points: np.ndarray, gradient: np.ndarray, value: float) -> float:
+def _scale(natural: np.ndarray, value: float) -> float:
+    """``max(|value|, max(natural))``, 1 where that is 0 or not finite (``natural``: the natural scale's row)."""
     scale = abs(value)
-    if len(points):
-        norms = np.stack([np.linalg.norm(points[:, s], axis=1) for s in kernels.slices], axis=1)
-        natural = float(np.max(np.sum(np.abs(gradient) * norms[:, kernels.vector_of], axis=1)))
-        if math.isfinite(natural):
-            scale = max(scale, natural)
+    if len(natural):
+        largest = float(natural.max())
+        if math.isfinite(largest):
+            scale = max(scale, largest)
     return scale if scale > 0 and math.isfinite(scale) else 1.0
 
 
@@ -256,7 +275,9 @@ def surface_scale_of(system: MechanicalSystem, expr: sp.Expr, points: np.ndarray
     against. 1 for ``S = gamma3`` on |γ| = 1; ``|M|`` for ``S = M1``. Falls back to 1 when that is 0
     (no points, or a surface with a vanishing gradient there).
     """
-    kernels = _surface_kernels(system, expr)
     points = np.asarray(points, dtype=float).reshape(-1, system.dimension)
-    gradient = kernels.report(points, p)[:, 1:1 + kernels.n] if len(points) else np.empty((0, kernels.n))
-    return _scale(kernels, points, gradient, value)
+    if not len(points):
+        return _scale(np.empty(0), value)
+    kernels = _surface_kernels(system, expr)
+    runtime = taylor_system(system).runtime_parameters(np.asarray(p, dtype=float))
+    return _scale(kernels.evaluate(points, runtime, value)[kernels.natural_scale], value)

@@ -65,6 +65,7 @@ from nonholonomic.definition import (
     upper_triangle,
     vector_symbols,
 )
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import Potential, ZERO, catalog_of, harmonic, linear, resolve
 
 KIND = "ball_on_quadric"
@@ -172,6 +173,7 @@ def angular_acceleration(n: sp.Matrix, n_dot: sp.Matrix, F: sp.Matrix, torque: s
 
 
 @lru_cache(maxsize=None)
+@remembered("reduction")
 def reduction_residual() -> sp.Matrix:
     """The solved dω/dt of :func:`eliminate_reaction` minus :func:`angular_acceleration` on the
     constraint set |n| = 1, (n, dn/dt) = 0, simplified (the zero vector if the closed form is right).
@@ -227,6 +229,7 @@ def joachimsthal(k: sp.Expr = sp.Integer(0)) -> sp.Expr:
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The nonholonomic Jacobi problem with ``potential`` (a key of :data:`POTENTIALS`).
 

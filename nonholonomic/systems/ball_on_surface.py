@@ -43,6 +43,7 @@ from nonholonomic.definition import (
     gradient,
 )
 from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import (
     MAX_EXPRESSION_LENGTH,
     MAX_EXPRESSION_PARAMETERS,
@@ -156,6 +157,7 @@ def newton_step(Phi: sp.Expr) -> tuple[sp.Expr, ...]:
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero", on: Surface = DEFAULT_SURFACE) -> MechanicalSystem:
     """The ball rolling with ``potential`` (a key of :data:`POTENTIALS` or a user's) on the surface ``on``.
 

@@ -34,6 +34,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import Potential, ZERO, brun, catalog_of, linear, resolve
 
 KIND = "chaplygin_ball"
@@ -96,6 +97,7 @@ STATE = (
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Chaplygin's ball with the potential ``potential`` (a key of :data:`POTENTIALS`).
 

@@ -65,6 +65,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import Potential, ZERO, catalog_of, linear, resolve
 from nonholonomic.systems.chaplygin_ball import (
     D,
@@ -173,6 +174,7 @@ def space_fixed_vector() -> sp.Matrix:
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Chaplygin's ball with the Veselova constraint and the potential ``potential`` (a key of
     :data:`POTENTIALS`).

@@ -54,6 +54,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
 
 KIND = "clebsch"
@@ -162,6 +163,7 @@ MEASURE = InvariantMeasure(sp.Integer(1), "rho = 1 (Lie-Poisson flow on e(3): di
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Clebsch case of the Kirchhoff equations, eq. (2504-13), with H after Proposition 1 (corrected).
 

@@ -43,6 +43,7 @@ from nonholonomic.definition import (
     StateVector,
 )
 from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, smooth_potential
 
 KIND = "generalized_chaplygin"
@@ -255,6 +256,7 @@ def _theorem_1(data: ChaplyginData) -> tuple[Any, str]:
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(data: ChaplyginData, reduce: bool = True) -> MechanicalSystem:
     """The user's system as a :class:`MechanicalSystem` in the state (q, q̇).
 

@@ -31,6 +31,7 @@ from functools import lru_cache
 import sympy as sp
 
 from nonholonomic.definition import FirstIntegral, MechanicalSystem, Parameter, dot
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
 from nonholonomic.systems import clebsch
 from nonholonomic.systems.clebsch import INERTIA, UNIT_C, UNIT_K, I1, I2, I3, L, c, k, s
@@ -77,6 +78,7 @@ def uhlenbeck_integrals() -> list[FirstIntegral]:
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Neumann problem: eq. (2504-13) at α = 1, β = 0.
 

@@ -47,6 +47,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import Potential, ZERO, catalog_of, linear, resolve
 from nonholonomic.systems.chaplygin_ball import D, I1, I2, I3, J, J_inv, contact_inertia, det_J, inertia
 from nonholonomic.systems.chaplygin_ball_veselova import constrained_acceleration
@@ -96,6 +97,7 @@ def measure_density(g: sp.Matrix = gamma) -> sp.Expr:
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The rubber ball with the potential ``potential`` (a key of :data:`POTENTIALS`).
 

@@ -35,6 +35,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import Potential, ZERO, brun, catalog_of, linear, quadratic, resolve
 
 KIND = "veselova"
@@ -86,6 +87,7 @@ def equations_of_motion(U: sp.Expr, mu: sp.Expr) -> tuple[sp.Expr, ...]:
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """The Veselova system with ``potential`` (a key of :data:`POTENTIALS`)."""
     pot = resolve(POTENTIALS, potential)

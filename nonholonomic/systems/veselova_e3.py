@@ -32,6 +32,7 @@ from nonholonomic.definition import (
     StateVector,
     dot,
 )
+from nonholonomic.memo import remembered
 from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
 from nonholonomic.systems.clebsch import INERTIA, I1, I2, I3, inertia
 
@@ -80,6 +81,7 @@ def hamiltonian() -> sp.Expr:
 
 
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
+@remembered("definition")  # derived once per machine and version (nonholonomic.memo)
 def define(potential: str | Potential = "zero") -> MechanicalSystem:
     """Eq. (2504-12) on e(3), rhs ``dx/dt = {H, x}`` derived by sympy.
 

@@ -26,7 +26,7 @@ from service.backends.job_threads import JobThreads
 from store.ensembles import EnsembleStore
 from store.jobs import JobStore, StoredJob
 from workers.ensembles import run_ensemble_chunk
-from workers.jobs import run_job, warm_up
+from workers.jobs import WarmUp, run_job, warm_up
 from workers.limits import Deadline, JobTimeout, soft_limit_message
 
 log = logging.getLogger(__name__)
@@ -84,6 +84,7 @@ class EmbeddedBackend:
         self._closing = threading.Event()
         threading.Thread(target=self._watch, daemon=True, name="nonholonomic-job-watchdog").start()
         self._warm = threading.Event()
+        self._warming = WarmUp()
         if settings.warm_up:  # in its own thread, so the first jobs need not wait behind it
             threading.Thread(target=self._warm_up, daemon=True, name="nonholonomic-warm-up").start()
         else:
@@ -99,7 +100,7 @@ class EmbeddedBackend:
 
     def _warm_up(self) -> None:
         try:
-            warm_up()
+            warm_up(self._warming)
         finally:
             self._warm.set()
 
@@ -240,10 +241,15 @@ class EmbeddedBackend:
 
     def health(self) -> dict[str, Any]:
         warm = self._warm.is_set()
-        detail = None if warm else "the integrators are being compiled (warm-up): jobs would wait for it"
+        w = self._warming
+        detail = None if warm else (
+            f"warm-up ({w.done} of {w.total or '?'} systems{f', now {w.now}' if w.now else ''}; "
+            f"{'first start: deriving and compiling, ~30 s on 2 cores' if w.derived > w.read_back else 'from the cache'})"
+            ": jobs would wait for it")
         store = "ok" if self.store.ping() else "unreachable"
         return {"ok": warm and store == "ok", "mode": self.mode, "broker": "none (embedded)", "store": store,
-                "workers": {"threads": self._threads, "warm": warm}, **({"detail": detail} if detail else {})}
+                "workers": {"threads": self._threads, "warm": warm, "warm_up": w.as_json()},
+                **({"detail": detail} if detail else {})}
 
     def close(self) -> None:
         """Stop every job and ensemble chunk at its next progress report, drop what is queued (the jobs

@@ -18,7 +18,6 @@ from service.backends import JobBackend, JobRecord
 from service.ensembles import members_page, request_units, view
 from service.errors import ProblemError, media_responses, problem_responses
 from service.pages import render_ensemble, render_job, render_report, render_report_status
-from service.plots import FORMATS, PlotUnavailable, ensemble_plot, job_plot
 from service.security import content_disposition
 
 router = APIRouter()
@@ -68,8 +67,12 @@ def _ensemble(request: Request, ensemble_id: str) -> dict[str, Any]:
     return ensemble_of(request, ensemble_id)
 
 
+#: Media types of the plots (:data:`service.plots.FORMATS`, without importing matplotlib at start-up).
+IMAGE_TYPES = {"png": "image/png", "svg": "image/svg+xml"}
+
+
 def _image(data: bytes, fmt: str, filename: str) -> Response:
-    return Response(data, media_type=FORMATS[fmt], headers=content_disposition("inline", filename))
+    return Response(data, media_type=IMAGE_TYPES[fmt], headers=content_disposition("inline", filename))
 
 
 @router.get("/v1/jobs/{job_id}/page", tags=["jobs"], operation_id="jobs-page", response_class=HTMLResponse,
@@ -106,6 +109,8 @@ def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Req
                                                  "succeeded", CONFLICT)
     if "trajectory" not in record.result:
         raise ProblemError(409, "No plots", f"job {job_id} is a paper report, not a simulation", CONFLICT)
+    from service.plots import PlotUnavailable, job_plot  # matplotlib: imported when the first plot is drawn
+
     try:
         data = _cache.get(("job", job_id, name, fmt), lambda: job_plot(name, record.result, record.request, fmt),
                           keep=True)
@@ -144,6 +149,8 @@ def ensemble_plot_route(ensemble_id: str, name: EnsemblePlotName, fmt: PlotForma
         raise ProblemError(409, "No members yet", f"ensemble {ensemble_id} is {current['status']} and no chunk has "
                                                   "finished yet", CONFLICT)
     finished = current["status"] in ("succeeded", "failed", "cancelled")
+    from service.plots import PlotUnavailable, ensemble_plot  # matplotlib: imported when the first plot is drawn
+
     try:
         data = _cache.get(("ensemble", ensemble_id, name, fmt, str(len(record["done"]))),
                           lambda: ensemble_plot(name, current, _all_members(request, ensemble_id, record), fmt),

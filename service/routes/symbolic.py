@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import sympy as sp
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Request, Response
 from starlette.concurrency import run_in_threadpool
 
 from schemas.problems import TIMEOUT, FieldError
@@ -112,14 +112,34 @@ def _check_size(request: BracketVerifyRequest | HamiltonizeRequest, settings: Se
         raise invalid_request(errors)
 
 
-async def _run(http: Request, fn: Any, payload: dict[str, Any], budget_s: float) -> Any:
-    """``fn(payload)`` in a child process (:mod:`service.isolated`), holding a slot of the symbolic pool
-    (:mod:`service.admission`); the child's problems become 422s, a child past its limit a 408."""
-    from service.isolated import GRACE_S, IsolatedTimeout, run_isolated
+#: RFC 9211's ``Cache-Status`` of a symbolic answer: read back, or computed (and stored when decided).
+CACHE_HIT, CACHE_MISS = "nonholonomic; hit", "nonholonomic; fwd=miss"
 
+
+async def _run(http: Request, fn: Any, payload: dict[str, Any], budget_s: float, response: Response) -> Any:
+    """``fn(payload)`` in a child process (:mod:`service.isolated`), holding a slot of the symbolic pool
+    (:mod:`service.admission`); the child's problems become 422s, a child past its limit a 408. An
+    answer decided within its budget is remembered (:mod:`workers.disk_memo`): the same body is then
+    answered at once."""
+    from nonholonomic import memo
+    from service.isolated import GRACE_S, IsolatedTimeout, run_isolated
+    from workers.disk_memo import deterministic
+
+    # the same body, the same code and libraries: the same answer, remembered unless a budget cut it short
+    key = memo.key_of("symbolic-response", (fn.__name__, payload)) if memo.installed() else None
+    if key is not None:
+        found, answer = await run_in_threadpool(memo.recall, key)
+        if found:
+            response.headers["Cache-Status"] = CACHE_HIT
+            return answer
     async with http.app.state.symbolic_pool.slot():
         try:
-            return await run_in_threadpool(run_isolated, fn, (payload,), budget_s + GRACE_S)
+            answer = await run_in_threadpool(run_isolated, fn, (payload,), budget_s + GRACE_S)
+            stored = key is not None and deterministic(answer)
+            if stored:
+                await run_in_threadpool(memo.keep, key, answer)
+            response.headers["Cache-Status"] = CACHE_MISS + ("; stored" if stored else "")
+            return answer
         except FieldProblem as exc:
             raise invalid_request([FieldError(field=exc.field, reason=exc.reason)]) from None
         except IsolatedTimeout as exc:
@@ -151,9 +171,10 @@ def _verify_in_child(payload: dict[str, Any]) -> dict[str, Any]:
 @router.post("/v1/brackets/verify", operation_id="symbolic-brackets-verify", response_model=BracketVerifyResult,
              response_model_exclude_unset=True, responses=_ERRORS,
              summary="Jacobi identity, Casimirs and rank of a user-given bracket")
-async def verify_bracket(request: BracketVerifyRequest, http: Request) -> dict[str, Any]:
+async def verify_bracket(request: BracketVerifyRequest, http: Request, response: Response) -> dict[str, Any]:
     _check_size(request, get_settings())
-    return await _run(http, _verify_in_child, request.model_dump(), request.budget_s)  # type: ignore[no-any-return]
+    return await _run(http, _verify_in_child, request.model_dump(),  # type: ignore[no-any-return]
+                      request.budget_s, response)
 
 
 def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
@@ -184,9 +205,10 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
 @router.post("/v1/hamiltonize", operation_id="symbolic-hamiltonize", response_model=HamiltonizeResult,
              response_model_exclude_unset=True, responses=_ERRORS,
              summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
-async def hamiltonize(request: HamiltonizeRequest, http: Request) -> dict[str, Any]:
+async def hamiltonize(request: HamiltonizeRequest, http: Request, response: Response) -> dict[str, Any]:
     _check_size(request, get_settings())
-    return await _run(http, _hamiltonize_in_child, request.model_dump(), request.budget_s)  # type: ignore[no-any-return]
+    return await _run(http, _hamiltonize_in_child, request.model_dump(),  # type: ignore[no-any-return]
+                      request.budget_s, response)
 
 
 #: The name standing for the reducing multiplier N in ``monopole.shift``.

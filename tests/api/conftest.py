@@ -31,3 +31,21 @@ def client(monkeypatch) -> Iterator[TestClient]:
     with TestClient(create_app()) as c:
         yield c
     get_settings.cache_clear()
+
+
+@pytest.fixture()
+def cached_client(monkeypatch, tmp_path):
+    """The embedded API with a memo of its own (``tmp_path``): the first answer is computed, not read."""
+    from nonholonomic import memo
+
+    previous = memo.installed()
+    monkeypatch.delenv("REDIS_URL", raising=False)
+    monkeypatch.setenv("NONHOLONOMIC_WARM_UP", "false")
+    monkeypatch.setenv("NONHOLONOMIC_CACHE_DIR", str(tmp_path))
+    get_settings.cache_clear()
+    try:
+        with TestClient(create_app()) as c:
+            yield c
+    finally:
+        get_settings.cache_clear()
+        memo.install(previous)

@@ -22,7 +22,7 @@ def test_embedded_health_is_503_until_the_warm_up_ends(monkeypatch):
     from service.main import create_app
 
     release = threading.Event()
-    monkeypatch.setattr(embedded, "warm_up", lambda: release.wait(30))
+    monkeypatch.setattr(embedded, "warm_up", lambda state=None: release.wait(30))
     monkeypatch.delenv("REDIS_URL", raising=False)
     monkeypatch.setenv("NONHOLONOMIC_WARM_UP", "true")
     get_settings.cache_clear()

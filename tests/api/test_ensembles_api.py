@@ -99,20 +99,20 @@ def test_sweep_members_equal_single_jobs(client):
 def test_a_member_that_blows_up_fails_alone(client, monkeypatch):
     """A member whose integration fails (heyoka's non-finite state; admissible inputs no longer
     overflow, so the failure is injected into the second lane) fails alone."""
-    from nonholonomic import integration
+    from nonholonomic import integration, integration_batch
 
     huge = {"members": {"initial_states": [STATE, {"M": [1e200, 1e200, 0.0], "gamma": [0.0, 0.6, 0.8]}]},
             "system": dict(BALL), "t_final": 10.0}
     refused = client.post("/v1/ensembles", json=huge)
     assert refused.status_code == 422 and "members.initial_states[1].M[0]" in refused.text
-    real = integration.integrate_batch
+    real = integration_batch.integrate_batch
 
     def second_lane_blows_up(*args, **kwargs):
         out = real(*args, **kwargs)
         out[1] = integration.IntegrationError("heyoka stopped at t = 0.25 with outcome err_nf_state (non-finite state)")
         return out
 
-    monkeypatch.setattr(integration, "integrate_batch", second_lane_blows_up)
+    monkeypatch.setattr(integration_batch, "integrate_batch", second_lane_blows_up)
     body = {"system": dict(BALL), "t_final": 10.0, "members": {"initial_states": [STATE, STATE, STATE]}}
     r = client.post("/v1/ensembles", json=body)
     assert r.status_code == 202, r.text

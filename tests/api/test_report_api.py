@@ -42,3 +42,21 @@ def test_the_page_of_an_unknown_or_non_report_job_is_404(client):
     job = client.post("/v1/jobs", json=body).json()["id"]
     r = client.get(f"/v1/paper/report/{job}")
     assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
+
+
+def test_a_second_report_is_read_back_with_the_versions_it_was_computed_with(cached_client):
+    claims = {"claims": ["veselova.multiplier", "ball.theorem_3"]}
+    views = []
+    for _ in range(2):
+        r = cached_client.post("/v1/paper/report", json=claims)
+        view = poll_job(cached_client, r.headers["location"], timeout=300)
+        assert view["status"] == "succeeded", view["error"]
+        views.append(view)
+    first, second = (v["result"] for v in views)
+    assert first["computed"]["cached"] is False and second["computed"]["cached"] is True
+    assert second["rows"] == first["rows"] and second["summary"] == first["summary"]
+    assert second["computed"]["at"] == first["computed"]["at"]  # when it was computed, not now
+    versions = second["computed"]["versions"]
+    assert {"nonholonomic", "code", "sympy", "heyoka", "numpy"} <= set(versions)
+    page = cached_client.get(f"/v1/paper/report/{views[1]['id']}").text
+    assert "Read back from the cache" in page and f"sympy {versions['sympy']}" in page

@@ -37,8 +37,8 @@ pytestmark = pytest.mark.integration
 BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7,
                    "potential": {"kind": "brun", "k": 0.4}},
         "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 11}
-#: About 8 s of integration on one core: long enough to kill or stop its worker mid-run.
-LONG = {**BODY, "t_final": 3e6}
+#: About 4 s of integration on one quiet core: long enough to kill or stop its worker mid-run.
+LONG = {**BODY, "t_final": 1.5e6}
 LIMITS = {"NONHOLONOMIC_MAX_T_FINAL": "1e9"}
 #: A hang guard, not a result: a job whose worker died whole completes on a live worker (the sweep sends
 #: it again within seconds; ~8 s of integration, far longer on a loaded 2-core machine).
@@ -161,10 +161,9 @@ def test_sigterm_lets_the_running_job_finish_before_the_worker_exits(stack):
 def test_a_job_past_its_time_limit_fails_clearly_and_the_worker_stays_healthy(stack):
     stack.start_worker(**SHORT_LIMITS)
     wait_healthy(stack.base, timeout=180)
-    start = time.monotonic()
-    location = stack.client.post("/v1/jobs", json=LONG).headers["location"]
+    location = stack.client.post("/v1/jobs", json={**LONG, "t_final": 6e6}).headers["location"]  # ~16 s
     view = poll_job(stack.client, location, timeout=60)
-    assert view["status"] == "failed" and time.monotonic() - start < 4 + 5  # not the job's 9 s
+    assert view["status"] == "failed"
     # Stopped at the soft limit (the job's next progress report), or, if none came before it on a busy
     # machine (seen in CI), killed at the hard one; either way a clear error, and the worker goes on.
     assert view["error"] in ({"type": "JobTimeout", "message": "the job exceeded its time limit of 2 s"},

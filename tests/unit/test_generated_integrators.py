@@ -18,8 +18,8 @@ from nonholonomic.integration import (
     StepRecorder,
     Trajectory,
     integrate,
-    integrate_batch,
 )
+from nonholonomic.integration_batch import integrate_batch
 from nonholonomic.kernels import numeric, parameter_vector
 from nonholonomic.systems import SUPPORTED_POTENTIALS
 from nonholonomic.taylor import taylor_system

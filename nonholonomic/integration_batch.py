@@ -1,0 +1,279 @@
+"""Many members of one system at once: heyoka's batch mode (``hy.recommended_simd_size()`` SIMD lanes).
+
+The batch path beside :mod:`nonholonomic.integration` (one orbit) and on its integrators: each member gets the :class:`~nonholonomic.integration.Trajectory`
+the one-orbit path would give it, and a member whose lane fails is integrated alone to say why.
+"""
+
+from __future__ import annotations
+
+import time
+
+import heyoka as hy
+import numpy as np
+
+from nonholonomic.definition import MechanicalSystem
+from nonholonomic import integration  # FIRST_SEGMENT_STEPS read at run time (tests change it)
+from nonholonomic.integration import (
+    MACHINE_EPSILON,
+    IntegrationCancelled,
+    IntegrationError,
+    ProgressCallback,
+    StepRecorder,
+    Trajectory,
+    _batch_integrator,
+    _GOING,
+    _integrate_heyoka,
+    _sample_grid,
+    _Segments,
+    _taylor,
+    _versions,
+)
+
+
+def integrate_batch(
+    system: MechanicalSystem,
+    parameters: np.ndarray,
+    initial_states: np.ndarray,
+    t_final: float,
+    samples: int,
+    *,
+    tolerance: float | None = None,
+    progress: ProgressCallback | None = None,
+) -> list[Trajectory | IntegrationError]:
+    """Integrate many members (one system, each with its own parameters and initial state) with
+    heyoka's batch mode, ``hy.recommended_simd_size()`` members at a time.
+
+    Each member gets the :class:`Trajectory` :func:`integrate` would give it (samples, τ, steps and
+    step states for the integral checks, equal up to rounding: the SIMD lanes and the scalar
+    integrator may round differently in the last bit), except ``wall_time_s``: its batch's wall
+    time divided among the batch's members. The last batch is padded with copies of the last
+    member. A member whose lane fails (e.g. a non-finite state) fails alone: its entry is the
+    :class:`IntegrationError` found by integrating it alone with :func:`integrate`'s integrator,
+    and its batch is run again without it (lanes do not influence each other).
+
+    Parameters
+    ----------
+    parameters : shape ``(n_members, n_parameters)``, rows in the order of ``system.parameter_symbols``.
+    initial_states : shape ``(n_members, dimension)``.
+    t_final, samples : the sample grid ``linspace(0, t_final, samples)``, shared by all members.
+    tolerance : heyoka's tolerance (default machine epsilon).
+    progress : ``progress(fraction of members done) -> keep_going``, called after each batch and
+        between the segments of a long run; False cancels (raises :class:`IntegrationCancelled`).
+
+    Returns
+    -------
+    list
+        One entry per member, in order: a :class:`Trajectory` or an :class:`IntegrationError`.
+
+    Raises
+    ------
+    IntegrationCancelled, ValueError
+    """
+    ts = _taylor(system)
+    P = np.asarray(parameters, dtype=float)
+    Y0 = np.asarray(initial_states, dtype=float)
+    if P.ndim != 2 or P.shape[1] != ts.n_user_pars:
+        raise ValueError(f"parameters need shape (n_members, {ts.n_user_pars}), got {P.shape}")
+    if Y0.shape != (len(P), system.dimension):
+        raise ValueError(f"initial_states need shape ({len(P)}, {system.dimension}), got {Y0.shape}")
+    tol = tolerance or MACHINE_EPSILON
+    lanes = hy.recommended_simd_size()
+    run = _BatchRun(ts, _batch_integrator(system, tol, lanes), _sample_grid(float(t_final), int(samples)), tol)
+    pars = ts.runtime_parameters(P.T).T if len(P) else P  # every member's runtime parameters at once
+    results: list[Trajectory | IntegrationError] = [None] * len(P)  # type: ignore[list-item]
+    for first in range(0, len(P), lanes):
+        stop = min(first + lanes, len(P))
+
+        def within(fraction: float, first: int = first, count: int = stop - first) -> bool:
+            return True if progress is None else bool(progress((first + count * fraction) / len(P)))
+
+        run.members(first, P[first:stop], pars[first:stop], Y0[first:stop], within, results)
+        if progress is not None and stop < len(P) and not progress(stop / len(P)):
+            raise IntegrationCancelled(f"cancelled after {stop} of {len(P)} members")
+    run.finish(results)
+    return results
+
+
+#: One lane's result before its wall time is known: samples, τ (or None), step times, step states, steps.
+_Lane = tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray, int]
+_FIELDS = ("states", "tau", "step_t", "step_states", "steps", "t", "engine", "tolerance", "wall_time_s", "versions")
+
+
+def _trajectory(lane: _Lane, common: tuple[object, ...]) -> Trajectory:
+    """A member's :class:`Trajectory` from its lane and the batch's ``t, engine, tolerance, wall_time_s,
+    versions``, in one ``__dict__`` update (not the frozen dataclass's ``__setattr__`` per field)."""
+    trajectory = object.__new__(Trajectory)
+    trajectory.__dict__.update(zip(_FIELDS, (*lane, *common)))
+    return trajectory
+
+
+class _BatchRun:
+    """The members of one :func:`integrate_batch` call, one batch integrator's lanes at a time. Short
+    runs (every lane at ``t_final`` within :data:`~nonholonomic.integration.FIRST_SEGMENT_STEPS` steps: an ensemble's common case)
+    keep their step records in one log of the call and are finished all together (:meth:`finish`: a few
+    array operations in all instead of a few dozen per batch); long runs and failures batch by batch."""
+
+    def __init__(self, ts: TaylorSystem, ta: hy.taylor_adaptive_batch, grid: np.ndarray, tol: float) -> None:
+        self.ts, self.ta, self.grid, self.tol = ts, ta, grid, tol
+        self.lanes = ta.batch_size
+        self.times, self.where = np.unique(grid, return_inverse=True)  # propagate_grid wants increasing times
+        self.lane_grid = np.repeat(self.times[:, None], self.lanes, axis=1)
+        self.versions = _versions()
+        # Views on the integrator's buffers; the step log: per step, the raw bytes of its state and time.
+        self.state, self.pars, self.time = ta.state, ta.pars, ta.time
+        state, clock = memoryview(self.state).cast("B"), memoryview(self.time).cast("B")
+        self.log = bytearray()
+        append = self.log.extend
+
+        def on_step(_: hy.taylor_adaptive_batch) -> bool:
+            append(state)
+            append(clock)
+            return True
+
+        self.on_step, self.start_record = on_step, (state, clock)
+        #: Short runs waiting for :meth:`finish`: (first member, count, start, end, log offset, samples).
+        self.short: list[tuple[int, int, float, float, int, np.ndarray]] = []
+
+    def members(self, first: int, P: np.ndarray, pars: np.ndarray, Y0: np.ndarray, progress: ProgressCallback,
+                results: list[Trajectory | IntegrationError]) -> None:
+        """Members ``first ..`` (up to ``lanes``: parameters, runtime parameters, initial states) in one
+        batch, into ``results`` (a short run at :meth:`finish`); padding lanes copy the last member. A
+        member whose lane fails is integrated alone (for its reason, or its trajectory if it then
+        succeeds) and its lane given to a healthy member for another run of the batch."""
+        alone: dict[int, Trajectory | IntegrationError] = {}
+        start = time.perf_counter()
+        count = len(P)
+        source = list(range(count)) + [count - 1] * (self.lanes - count)
+        lanes, bad = self.run(*((pars, Y0) if count == self.lanes else (pars[source], Y0[source])), progress,
+                              (first, count, start))
+        while bad:
+            for i in {source[lane] for lane in bad}:
+                try:
+                    # with progress: a cancellation or time limit acts here too
+                    alone[i] = _integrate_heyoka(self.ts.system, P[i], Y0[i], self.grid, self.tol, progress)
+                except IntegrationError as exc:
+                    alone[i] = exc
+            healthy = [i for i in range(count) if i not in alone]
+            if not healthy:
+                results[first:first + count] = [alone[i] for i in range(count)]
+                return
+            source = [healthy[-1] if i in alone else i for i in range(count)] + [healthy[-1]] * (self.lanes - count)
+            lanes, bad = self.run(pars[source], Y0[source], progress)
+        if lanes is None:  # a short run: finished with the others
+            return
+        common = (self.grid, "heyoka", self.tol, (time.perf_counter() - start) / count, self.versions)
+        results[first:first + count] = [alone[i] if i in alone else _trajectory(lane, common)
+                                        for i, lane in enumerate(lanes[:count])]
+
+    def run(self, pars: np.ndarray, Y0: np.ndarray, progress: ProgressCallback,
+            short: tuple[int, int, float] | None = None) -> tuple[list[_Lane] | None, list[int]]:
+        """One batch, one member per lane: each lane's result, or (if any failed) the failed lanes. With
+        ``short`` (first member, count, start time), a short run is kept for :meth:`finish` (returns None)."""
+        ts, ta, times, lanes = self.ts, self.ta, self.times, self.lanes
+        n, nv = ts.n_state, len(ts.variables)
+        ta.set_time(0.0)
+        self.state[:n] = Y0.T
+        self.state[n:] = 0.0  # tau
+        self.pars[:] = pars.T
+        if len(times) == 1:
+            out = self.state[None].copy()
+            step_t, step_states = [np.zeros(1)] * lanes, [y[None].copy() for y in Y0]
+            nsteps = [0] * lanes
+        else:
+            # First segment: propagate_grid writes the samples, a lean callback logs the states.
+            log, mark = self.log, len(self.log)
+            log += self.start_record[0]
+            log += self.start_record[1]
+            _, out = ta.propagate_grid(self.lane_grid, max_steps=integration.FIRST_SEGMENT_STEPS, callback=self.on_step)
+            if short is not None and (self.time == times[-1]).all():  # every lane there: no failure, no step limit
+                out[-1] = self.state  # the last samples are the final states themselves
+                self.short.append((*short, time.perf_counter(), mark, out))
+                return None, []
+            records = np.frombuffer(bytes(log[mark:])).reshape(-1, nv + 1, lanes)  # rows: state, τ, t
+            del log[mark:]
+            res = ta.propagate_res
+            outcomes = [r[0] for r in res]
+            if any(o not in _GOING for o in outcomes):
+                return [], [j for j, o in enumerate(outcomes) if o not in _GOING]
+            nsteps = [r[3] for r in res]
+            # A lane's own steps are its first records; once arrived it takes empty steps.
+            if hy.taylor_outcome.step_limit in outcomes:
+                recorders = [StepRecorder() for _ in range(lanes)]
+                for j, rec in enumerate(recorders):
+                    rec.extend(records[:nsteps[j] + 1, nv, j], records[:nsteps[j] + 1, :n, j])
+                total = np.array(nsteps)
+                bad = self.long_run(recorders, out, total, progress)
+                if bad:
+                    return [], bad
+                nsteps = total.tolist()
+                step_t, step_states = [r.t for r in recorders], [r.states for r in recorders]
+            else:
+                step_t = [records[:k + 1, nv, j] for j, k in enumerate(nsteps)]
+                step_states = [records[:k + 1, :n, j] for j, k in enumerate(nsteps)]
+            out[-1] = self.state  # the last samples are the final states themselves
+        if len(times) < len(self.grid):
+            out = out[self.where]
+        return [(out[:, :n, j], out[:, n, j] if ts.has_tau else None, step_t[j], step_states[j],
+                 int(nsteps[j])) for j in range(lanes)], []
+
+    def finish(self, results: list[Trajectory | IntegrationError]) -> None:
+        """Every short run's trajectories into ``results``: step records are views of the log, a lane's
+        steps end where its time reaches ``t_final`` (then it takes empty steps); wall time: the batch's
+        per member plus a share of this pass."""
+        if not self.short:
+            return
+        tic = time.perf_counter()
+        n, nv, lanes = self.ts.n_state, len(self.ts.variables), self.lanes
+        records = np.frombuffer(self.log).reshape(-1, nv + 1, lanes)
+        starts = np.array([short[4] for short in self.short]) // ((nv + 1) * lanes * 8)
+        clock = records[:, nv, :]
+        arrival = np.where(clock == self.times[-1], np.arange(len(records))[:, None], len(records))
+        steps = (np.minimum.reduceat(arrival, starts, axis=0) - starts[:, None]).tolist()
+        samples = np.stack([short[5] for short in self.short])  # batch, time, variable, lane
+        if len(self.times) < len(self.grid):
+            samples = samples[:, self.where]
+        tau = samples[:, :, n] if self.ts.has_tau else None
+        share = (time.perf_counter() - tic) / sum(short[1] for short in self.short)
+        for b, ((first, count, start, end, _, _), s, lane_steps) in enumerate(zip(self.short, starts.tolist(), steps)):
+            common = (self.grid, "heyoka", self.tol, (end - start) / count + share, self.versions)
+            for j in range(count):
+                k = lane_steps[j]
+                results[first + j] = _trajectory((samples[b, :, :n, j], None if tau is None else tau[b, :, j],
+                                                  records[s:s + k + 1, nv, j], records[s:s + k + 1, :n, j], k), common)
+        self.short.clear()
+
+    def long_run(self, recorders: list[StepRecorder], out: np.ndarray, nsteps: np.ndarray,
+                 progress: ProgressCallback) -> list[int]:
+        """Go on to ``t_final`` in continuous-output segments (no Python per step); returns failed lanes."""
+        ta, times, n = self.ta, self.times, self.ts.n_state
+        segments, t_final = _Segments(len(self.ts.variables), ta.order, self.lanes), float(times[-1])
+        done = np.searchsorted(times, ta.time, side="right")
+        res = ta.propagate_res
+        while any(r[0] == hy.taylor_outcome.step_limit for r in res):
+            if not progress(float(np.mean(np.minimum(ta.time / t_final, 1.0)))):
+                raise IntegrationCancelled(f"cancelled at t = {ta.time.min():g}")
+            tic = time.perf_counter()
+            c_out, _ = ta.propagate_until(t_final, max_steps=segments.steps, c_output=True)
+            res = ta.propagate_res
+            bad = [j for j, r in enumerate(res) if r[0] not in _GOING]
+            if bad:
+                return bad
+            steps = np.array([r[3] for r in res])
+            nsteps += steps
+            if c_out is not None and steps.max() > 0:
+                # States after each step: the next steps' order-0 coefficients, then the current state.
+                ends = np.concatenate([c_out.tcs[1:, :n, 0, :], ta.state[None, :n, :]])
+                now = ta.time.copy()
+                upto = np.searchsorted(times, now, side="right")
+                wanted = upto - done
+                if wanted.max() > 0:  # one evaluation: each lane's times, padded with its current time
+                    k = np.arange(wanted.max())[:, None]
+                    at = np.where(k < wanted, times[np.minimum(done + k, len(times) - 1)], now)
+                    values = c_out(np.ascontiguousarray(at))
+                for j, rec in enumerate(recorders):
+                    rec.extend(c_out.times[1:steps[j] + 1, j], ends[:steps[j], :, j])
+                    if wanted[j] > 0:
+                        out[done[j]:upto[j], :, j] = values[:wanted[j], :, j]
+                done = np.maximum(done, upto)
+            segments.update(int(steps.max()), time.perf_counter() - tic)
+        return []
