@@ -135,7 +135,10 @@ def test_symbolic_requests_run_in_a_child_process_and_leave_no_threads(client):
     example = client.get("/v1/hamiltonize/examples").json()["examples"]["chaplygin_ball"]
     before = {t.name for t in threading.enumerate() if t.name.startswith("bounded-")}
     r = client.post("/v1/hamiltonize", json={**example, "budget_s": 0.5})
-    assert r.status_code == 200, r.text
+    # 200 with the steps past 0.5 s undecided; on a machine loaded enough that the child outlives its
+    # hard limit (0.5 s + GRACE_S, seen with two busy processes beside the suite), a 408: either way
+    # the work ended with the child
+    assert r.status_code in (200, 408), r.text
     after = {t.name for t in threading.enumerate() if t.name.startswith("bounded-")}
     assert after <= before  # nothing was started in the API process
 
