@@ -31,7 +31,7 @@ def start_fork_server(wait: bool = False) -> threading.Thread:
     """Start the fork server (its preloaded imports and warm-up, :mod:`service.fork_server_warm`: about
     3 s of CPU, most of it imports, with the memo on disk) in a thread, at the API's start-up, so that
     the first symbolic request or validation does not pay for it. The API does not wait for it
-    (``wait``: the tests do); a request arriving earlier waits for the same start.
+    (``wait``: block until it is up); a request arriving earlier waits for the same start.
     A failure (e.g. an interpreter whose main module cannot be re-imported) is logged, not raised: the
     API serves everything else, and a symbolic request reports it."""
     thread = threading.Thread(target=_start, daemon=True, name="nonholonomic-fork-server")

@@ -244,7 +244,7 @@ class EmbeddedBackend:
         w = self._warming
         detail = None if warm else (
             f"warm-up ({w.done} of {w.total or '?'} systems{f', now {w.now}' if w.now else ''}; "
-            f"{'first start: deriving and compiling, ~30 s on 2 cores' if w.derived > w.read_back else 'from the cache'})"
+            f"{'first start: deriving and compiling, about a minute on 2 cores' if w.derived > w.read_back else 'from the cache'})"
             ": jobs would wait for it")
         store = "ok" if self.store.ping() else "unreachable"
         return {"ok": warm and store == "ok", "mode": self.mode, "broker": "none (embedded)", "store": store,
