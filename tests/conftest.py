@@ -63,3 +63,15 @@ def pytest_collection_modifyitems(config, items) -> None:  # type: ignore[no-unt
         return len(LONGEST_FIRST) + (0 if "/integration/" in path else 1)
 
     items.sort(key=rank)
+
+
+@pytest.fixture(autouse=True)
+def _no_memo_between_tests():  # type: ignore[no-untyped-def]
+    """Each test starts with no memo installed in this process (an app's lifespan installs one for its
+    own test): a proof remembered on disk by an earlier run must not answer a test that checks budgets
+    and timeouts (seen in a second run of the suite)."""
+    from nonholonomic import memo
+
+    memo.install(None)
+    yield
+    memo.install(None)
