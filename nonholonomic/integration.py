@@ -214,9 +214,17 @@ def _taylor(system: MechanicalSystem) -> TaylorSystem:
 
 
 def _versions() -> dict[str, str]:
+    """The libraries a trajectory was computed with (a new dict; read once per process: importlib's
+    metadata parses scipy's METADATA file, ~0.5 ms, a few percent of an ensemble chunk)."""
+    return dict(_library_versions())
+
+
+@lru_cache(maxsize=1)
+def _library_versions() -> tuple[tuple[str, str], ...]:
     import sympy
 
-    return {"heyoka": hy.__version__, "sympy": sympy.__version__, "numpy": np.__version__, "scipy": metadata.version("scipy")}
+    return (("heyoka", hy.__version__), ("sympy", sympy.__version__), ("numpy", np.__version__),
+            ("scipy", metadata.version("scipy")))
 
 
 def _sample_grid(t_final: float, samples: int) -> np.ndarray:

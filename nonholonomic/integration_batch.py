@@ -1,7 +1,9 @@
 """Many members of one system at once: heyoka's batch mode (``hy.recommended_simd_size()`` SIMD lanes).
 
 The batch path beside :mod:`nonholonomic.integration` (one orbit) and on its integrators: each member gets the :class:`~nonholonomic.integration.Trajectory`
-the one-orbit path would give it, and a member whose lane fails is integrated alone to say why.
+the one-orbit path would give it, and a member whose lane fails is integrated alone to say why. With
+``check_points`` (what an ensemble chunk asks for) the states the evidence is computed at are equally
+spaced check points written by heyoka with the samples, not every accepted step: no Python call per step.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ def integrate_batch(
     samples: int,
     *,
     tolerance: float | None = None,
+    check_points: int | None = None,
     progress: ProgressCallback | None = None,
 ) -> list[Trajectory | IntegrationError]:
     """Integrate many members (one system, each with its own parameters and initial state) with
@@ -57,6 +60,13 @@ def integrate_batch(
     initial_states : shape ``(n_members, dimension)``.
     t_final, samples : the sample grid ``linspace(0, t_final, samples)``, shared by all members.
     tolerance : heyoka's tolerance (default machine epsilon).
+    check_points : None (default): ``step_t, step_states`` are the states at every accepted step, kept
+        by a step callback (a Python call per step: about a fifth of a short run's time). An int ``k``:
+        they are the states at ``k`` equally spaced times ``linspace(0, t_final, k)``, written by heyoka's
+        dense output inside ``propagate_grid`` with the samples (no Python per step; the integrals' worst
+        drift over an ensemble is the same, see :data:`nonholonomic.analysis.ensemble.CHECK_POINTS`). A
+        batch not finished within :data:`~nonholonomic.integration.FIRST_SEGMENT_STEPS` steps is run
+        again with the step log (its points: the steps).
     progress : ``progress(fraction of members done) -> keep_going``, called after each batch and
         between the segments of a long run; False cancels (raises :class:`IntegrationCancelled`).
 
@@ -76,9 +86,12 @@ def integrate_batch(
         raise ValueError(f"parameters need shape (n_members, {ts.n_user_pars}), got {P.shape}")
     if Y0.shape != (len(P), system.dimension):
         raise ValueError(f"initial_states need shape ({len(P)}, {system.dimension}), got {Y0.shape}")
+    if check_points is not None and check_points < 2:
+        raise ValueError(f"check_points must be None or at least 2, got {check_points}")
     tol = tolerance or MACHINE_EPSILON
     lanes = hy.recommended_simd_size()
-    run = _BatchRun(ts, _batch_integrator(system, tol, lanes), _sample_grid(float(t_final), int(samples)), tol)
+    run = _BatchRun(ts, _batch_integrator(system, tol, lanes), _sample_grid(float(t_final), int(samples)), tol,
+                    None if check_points is None else _sample_grid(float(t_final), int(check_points)))
     pars = ts.runtime_parameters(P.T).T if len(P) else P  # every member's runtime parameters at once
     results: list[Trajectory | IntegrationError] = [None] * len(P)  # type: ignore[list-item]
     for first in range(0, len(P), lanes):
@@ -113,10 +126,17 @@ class _BatchRun:
     keep their step records in one log of the call and are finished all together (:meth:`finish`: a few
     array operations in all instead of a few dozen per batch); long runs and failures batch by batch."""
 
-    def __init__(self, ts: TaylorSystem, ta: hy.taylor_adaptive_batch, grid: np.ndarray, tol: float) -> None:
+    def __init__(self, ts: TaylorSystem, ta: hy.taylor_adaptive_batch, grid: np.ndarray, tol: float,
+                 check_times: np.ndarray | None = None) -> None:
         self.ts, self.ta, self.grid, self.tol = ts, ta, grid, tol
         self.lanes = ta.batch_size
-        self.times, self.where = np.unique(grid, return_inverse=True)  # propagate_grid wants increasing times
+        # propagate_grid wants increasing times: the samples' and the check points' times, each once
+        self.times = np.unique(grid if check_times is None else np.concatenate([grid, check_times]))
+        self.where = np.searchsorted(self.times, grid)  # the samples' rows
+        self.check_times = check_times  # shared by every member's Trajectory: read-only
+        if check_times is not None:
+            check_times.flags.writeable = False
+        self.check_rows = None if check_times is None else np.searchsorted(self.times, check_times)
         self.lane_grid = np.repeat(self.times[:, None], self.lanes, axis=1)
         self.versions = _versions()
         # Views on the integrator's buffers; the step log: per step, the raw bytes of its state and time.
@@ -131,8 +151,9 @@ class _BatchRun:
             return True
 
         self.on_step, self.start_record = on_step, (state, clock)
-        #: Short runs waiting for :meth:`finish`: (first member, count, start, end, log offset, samples).
-        self.short: list[tuple[int, int, float, float, int, np.ndarray]] = []
+        #: Short runs waiting for :meth:`finish`: (first member, count, start, end, log offset, samples), the
+        #: log offset the steps per lane instead when the points are the check points.
+        self.short: list[tuple[int, int, float, float, int | list[int], np.ndarray]] = []
 
     def members(self, first: int, P: np.ndarray, pars: np.ndarray, Y0: np.ndarray, progress: ProgressCallback,
                 results: list[Trajectory | IntegrationError]) -> None:
@@ -179,8 +200,13 @@ class _BatchRun:
             out = self.state[None].copy()
             step_t, step_states = [np.zeros(1)] * lanes, [y[None].copy() for y in Y0]
             nsteps = [0] * lanes
+        elif self.check_rows is not None and (checked := self.run_checked(short)) is not None:
+            return checked
         else:
             # First segment: propagate_grid writes the samples, a lean callback logs the states.
+            ta.set_time(0.0)  # again after a checked run that did not finish
+            self.state[:n] = Y0.T
+            self.state[n:] = 0.0
             log, mark = self.log, len(self.log)
             log += self.start_record[0]
             log += self.start_record[1]
@@ -211,16 +237,38 @@ class _BatchRun:
                 step_t = [records[:k + 1, nv, j] for j, k in enumerate(nsteps)]
                 step_states = [records[:k + 1, :n, j] for j, k in enumerate(nsteps)]
             out[-1] = self.state  # the last samples are the final states themselves
-        if len(times) < len(self.grid):
-            out = out[self.where]
+        out = out[self.where]
         return [(out[:, :n, j], out[:, n, j] if ts.has_tau else None, step_t[j], step_states[j],
                  int(nsteps[j])) for j in range(lanes)], []
+
+    def run_checked(self, short: tuple[int, int, float] | None) -> tuple[list[_Lane] | None, list[int]] | None:
+        """One batch through ``propagate_grid`` alone (the state, parameters and time set by :meth:`run`),
+        the check points among the grid's times; None when a lane is still short of ``t_final`` after
+        :data:`~nonholonomic.integration.FIRST_SEGMENT_STEPS` steps (then :meth:`run` goes on with the step log)."""
+        ta, n = self.ta, self.ts.n_state
+        _, out = ta.propagate_grid(self.lane_grid, max_steps=integration.FIRST_SEGMENT_STEPS)
+        res = ta.propagate_res  # a new list of tuples at each access
+        if any(r[0] not in _GOING for r in res):
+            return [], [j for j, r in enumerate(res) if r[0] not in _GOING]
+        if not (self.time == self.times[-1]).all():
+            return None
+        out[-1] = self.state  # the last samples are the final states themselves
+        nsteps = [r[3] for r in res]
+        if short is not None:
+            self.short.append((*short, time.perf_counter(), nsteps, out))
+            return None, []
+        samples, checks = out[self.where], out[self.check_rows]
+        return [(samples[:, :n, j], samples[:, n, j] if self.ts.has_tau else None, self.check_times, checks[:, :n, j],
+                 nsteps[j]) for j in range(self.lanes)], []
 
     def finish(self, results: list[Trajectory | IntegrationError]) -> None:
         """Every short run's trajectories into ``results``: step records are views of the log, a lane's
         steps end where its time reaches ``t_final`` (then it takes empty steps); wall time: the batch's
         per member plus a share of this pass."""
         if not self.short:
+            return
+        if self.check_rows is not None:
+            self.finish_checked(results)
             return
         tic = time.perf_counter()
         n, nv, lanes = self.ts.n_state, len(self.ts.variables), self.lanes
@@ -229,9 +277,7 @@ class _BatchRun:
         clock = records[:, nv, :]
         arrival = np.where(clock == self.times[-1], np.arange(len(records))[:, None], len(records))
         steps = (np.minimum.reduceat(arrival, starts, axis=0) - starts[:, None]).tolist()
-        samples = np.stack([short[5] for short in self.short])  # batch, time, variable, lane
-        if len(self.times) < len(self.grid):
-            samples = samples[:, self.where]
+        samples = np.stack([short[5] for short in self.short])[:, self.where]  # batch, time, variable, lane
         tau = samples[:, :, n] if self.ts.has_tau else None
         share = (time.perf_counter() - tic) / sum(short[1] for short in self.short)
         for b, ((first, count, start, end, _, _), s, lane_steps) in enumerate(zip(self.short, starts.tolist(), steps)):
@@ -240,6 +286,24 @@ class _BatchRun:
                 k = lane_steps[j]
                 results[first + j] = _trajectory((samples[b, :, :n, j], None if tau is None else tau[b, :, j],
                                                   records[s:s + k + 1, nv, j], records[s:s + k + 1, :n, j], k), common)
+        self.short.clear()
+
+    def finish_checked(self, results: list[Trajectory | IntegrationError]) -> None:
+        """:meth:`finish` when the points are the check points: every short run's samples and check points
+        are rows of its ``propagate_grid`` output."""
+        tic = time.perf_counter()
+        n = self.ts.n_state
+        grids = np.stack([short[5] for short in self.short])  # batch, time, variable, lane
+        samples = grids[:, self.where]
+        # batch, lane, time, variable: each member's check points one contiguous block
+        checks = np.ascontiguousarray(grids[:, self.check_rows, :n].transpose(0, 3, 1, 2))
+        tau = samples[:, :, n] if self.ts.has_tau else None
+        share = (time.perf_counter() - tic) / sum(short[1] for short in self.short)
+        for b, (first, count, start, end, nsteps, _) in enumerate(self.short):
+            common = (self.grid, "heyoka", self.tol, (end - start) / count + share, self.versions)
+            for j in range(count):
+                results[first + j] = _trajectory((samples[b, :, :n, j], None if tau is None else tau[b, :, j],
+                                                  self.check_times, checks[b, j], nsteps[j]), common)
         self.short.clear()
 
     def long_run(self, recorders: list[StepRecorder], out: np.ndarray, nsteps: np.ndarray,

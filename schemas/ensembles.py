@@ -89,7 +89,8 @@ class EnsembleRequest(BaseModel):
     t_final: FiniteFloat = Field(gt=0, description="end of each member's integration [s]")
     samples: int = Field(2, ge=2, description="sample times per member (both ends included)")
     checks: list[Literal["integrals", "measure"]] = Field(
-        default_factory=lambda: ["integrals"], description="evidence per member")
+        default_factory=lambda: ["integrals"],
+        description="evidence per member, at its samples and 64 equally spaced check points (not every step)")
     poincare: PoincareRequest | None = None
     lyapunov: LyapunovRequest | None = None
     integrator: IntegratorOptions = Field(default_factory=IntegratorOptions)
