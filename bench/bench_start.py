@@ -34,6 +34,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import os  # noqa: E402
 import secrets  # noqa: E402
+import shutil  # noqa: E402
 import signal  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
@@ -121,9 +122,13 @@ def embedded_start(env: dict[str, str], log: Path) -> tuple[Service, str, float,
     since = time.monotonic()
     service.start([sys.executable, "scripts/serve.py", "--port", str(port)])
     base = f"http://127.0.0.1:{port}"
-    health = until_healthy(base, since)
-    with httpx.Client(base_url=base, timeout=120) as client:
-        first, _ = run_job(client, "/v1/jobs", BALL_JOB)
+    try:
+        health = until_healthy(base, since)
+        with httpx.Client(base_url=base, timeout=120) as client:
+            first, _ = run_job(client, "/v1/jobs", BALL_JOB)
+    except BaseException:  # a timeout or a failed job: no server left behind
+        service.stop()
+        raise
     return service, base, health, first
 
 
@@ -195,6 +200,8 @@ def main() -> None:
         print(f"  /health 200 after   {verdict(health, TARGET_HEALTH_S)}")
         print(f"  first ball job      {verdict(first, TARGET_FIRST_JOB_S)}")
     print(json.dumps({"load": os.getloadavg()}))
+    for part in ("data", "memo", "cache", "home"):  # the log stays
+        shutil.rmtree(work / part, ignore_errors=True)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,8 @@ from __future__ import annotations
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Hashable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -127,10 +128,52 @@ def start(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...] = ()) -> 
 def run(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...], budget_s: float) -> Outcome:
     """``fn(*args)`` waited on for at most ``budget_s`` seconds (shared and cached under ``key``)."""
     task = start(key, fn, args)
+    peek = getattr(_peeking, "on", False)
     if task is None:
+        if not peek:
+            cut_short()
         return Outcome("busy", None, 0.0, f"not started: {MAX_RUNNING} symbolic computations are already "
                                           "running in this process; try again later")
-    return task.outcome(budget_s)
+    outcome = task.outcome(budget_s)
+    if outcome.status == "timeout" and not peek:
+        cut_short()
+    return outcome
+
+
+_cut_short = 0
+_cut_lock = threading.Lock()
+_peeking = threading.local()
+
+
+@contextmanager
+def peeking() -> Iterator[None]:
+    """In this block (this thread), :func:`run` calls only start computations or read what is already
+    known (e.g. with a budget of 0, so that several proofs share one budget): their timeouts are not
+    counted by :func:`cut_short_count`; the call that waits for the verdict is."""
+    outer = getattr(_peeking, "on", False)
+    _peeking.on = True
+    try:
+        yield
+    finally:
+        _peeking.on = outer
+
+
+def cut_short() -> None:
+    """Count a computation that a budget or a busy process left undone (:func:`run` counts its own;
+    code that skips a step because no budget is left calls this)."""
+    global _cut_short
+    with _cut_lock:
+        _cut_short += 1
+
+
+def cut_short_count() -> int:
+    """How many computations a budget or a busy process has left undone in this process so far.
+
+    A result assembled while this count did not move depends only on its inputs and the code, so it
+    may be remembered whole (a symbolic request's answer, the paper report); otherwise it depends on
+    the machine's load at the time and is not. Other threads' cuts count too: a false "cut" only
+    means a result is not remembered."""
+    return _cut_short
 
 
 def verdict(outcome: Outcome) -> tuple[bool | None, str, Any]:

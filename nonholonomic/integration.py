@@ -20,8 +20,9 @@ The run is cut into segments, with no Python code per step where heyoka can do t
 Progress and cancellation are checked between segments; memory is bounded (one segment's Taylor
 coefficients, at most :data:`MAX_RECORDED_STEPS` recorded steps).
 
-:func:`integrate_batch` integrates many members at once with heyoka's batch mode
-(``taylor_adaptive_batch``, one member per SIMD lane), the same way.
+:func:`nonholonomic.integration_batch.integrate_batch` integrates many members at once with heyoka's
+batch mode (``taylor_adaptive_batch``, one member per SIMD lane), the same way or, for an ensemble,
+with equally spaced check points instead of the step log.
 """
 
 from __future__ import annotations
@@ -81,7 +82,9 @@ class Trajectory:
     """Samples at the requested times and the states at the accepted steps.
 
     ``step_states`` holds the initial state and the state after every accepted step unless there
-    were more than ``MAX_RECORDED_STEPS``; then it is thinned evenly (see :class:`StepRecorder`).
+    were more than ``MAX_RECORDED_STEPS``; then it is thinned evenly (see :class:`StepRecorder`). For
+    a member of an ensemble (``integrate_batch(check_points=k)``), ``step_t, step_states`` are the
+    states at ``k`` equally spaced check points instead (``steps`` still counts the accepted steps).
 
     ``states`` and ``step_states`` have shape ``(n, dim)`` in the order of ``system.state_symbols``.
     ``wall_time_s`` is the integration's wall time; for a member of :func:`integrate_batch`, its

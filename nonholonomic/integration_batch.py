@@ -30,6 +30,7 @@ from nonholonomic.integration import (
     _taylor,
     _versions,
 )
+from nonholonomic.taylor import TaylorSystem
 
 
 def integrate_batch(

@@ -2,7 +2,7 @@
 
 A system's definition, its heyoka form, its numpy kernels and its proofs depend only on the
 definition's inputs (kind, potential, surface ...) and on the code and library versions. Deriving
-them costs seconds of sympy in every new process (a worker's warm-up took ~20 s on 2 cores); read
+them costs seconds of sympy in every new process (a warm-up took 20–37 s on 2 cores); read
 back, they cost milliseconds. The core marks what may be remembered (:func:`remembered`,
 :func:`remember`) and asks a :class:`Memo` for it; the service installs one that keeps pickles on
 disk (``workers/disk_memo.py``), whose keys also hold the code's and libraries' fingerprint and whose
@@ -21,7 +21,7 @@ import hashlib
 import logging
 import pickle
 import threading
-from collections import OrderedDict
+import weakref
 from collections.abc import Callable
 from typing import Any, Protocol, TypeVar
 
@@ -64,24 +64,33 @@ def installed() -> Memo | None:
 
 #: The dataclass values :func:`remember` returned (a system's definition), by identity, with the key they
 #: were remembered under: what is derived from one (its kernels) is keyed by that key, not by its pickle.
-_origins: OrderedDict[int, tuple[object, str]] = OrderedDict()
-_origins_lock = threading.Lock()
-ORIGINS_KEPT = 1024
+#: Weak references: an entry goes with its value (the systems' own caches bound how many live).
+_origins: dict[int, tuple[weakref.ref, str]] = {}
+_origins_lock = threading.RLock()  # a weak reference's callback may run inside a locked block (GC)
 
 
 def _note_origin(value: object, key: str) -> None:
     if not dataclasses.is_dataclass(value) or isinstance(value, type):  # never a shared object (None, 0, "")
         return
+    ident = id(value)
+
+    def forget(ref: weakref.ref) -> None:
+        with _origins_lock:
+            if _origins.get(ident, (None, ""))[0] is ref:
+                del _origins[ident]
+
+    try:
+        ref = weakref.ref(value, forget)
+    except TypeError:  # a class without weak references: its derived values are keyed by their pickle
+        return
     with _origins_lock:
-        _origins[id(value)] = (value, key)
-        while len(_origins) > ORIGINS_KEPT:
-            _origins.popitem(last=False)
+        _origins[ident] = (ref, key)
 
 
 def origin(value: object) -> str | None:
     """The key ``value`` was remembered under in this process, if it came from :func:`remember`."""
     found = _origins.get(id(value))
-    return found[1] if found is not None and found[0] is value else None
+    return found[1] if found is not None and found[0]() is value else None
 
 
 class _ExactPrinter(StrPrinter):

@@ -42,6 +42,10 @@ and the flux of the smooth form is −4πc/√det I (N = ρ_μ): non-zero for c 
 Every symbolic step runs in a daemon thread under a time budget (the pattern of
 :mod:`nonholonomic.evidence.measure`); identities rational in sin qᵢ, cos qᵢ are decided exactly
 by the substitution t = tan(q/2) and an expanded numerator; numeric checks run at 40 digits.
+
+This module is the front door: the density's three searches are in
+:mod:`nonholonomic.reducing_multiplier_density`, the monopole integral in :mod:`nonholonomic.monopole`,
+the exact trigonometric decision in :mod:`nonholonomic.rational_trig`.
 """
 
 from __future__ import annotations
@@ -49,7 +53,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from fractions import Fraction
 from functools import lru_cache
 from typing import Any
 
@@ -60,6 +63,19 @@ from sympy.core.function import AppliedUndef
 
 from nonholonomic import bounded
 from nonholonomic.brackets import PoissonStructure, generalized_chaplygin_bracket
+from nonholonomic.monopole import SYMBOLIC_INTEGRAL_MAX_OPS, monopole_charge
+from nonholonomic.rational_trig import rational_trig_is_zero
+from nonholonomic.reducing_multiplier_density import (
+    BASE_POINT,
+    _density_ansatz,
+    _density_by_integration,
+    _density_equations_hold,
+    _density_line_integral,
+    _reduce_cos_squares,
+)
+
+__all__ = ["EQUATIONS", "ReducingMultiplierResult", "hamiltonize", "monopole_charge", "prove_theorem_1",
+           "rational_trig_is_zero", "BASE_POINT", "SYMBOLIC_INTEGRAL_MAX_OPS"]
 
 #: Where each item of the result comes from in the paper.
 EQUATIONS: dict[str, str] = {
@@ -86,10 +102,6 @@ NUMERIC_ZERO = 1e-25
 POINTWISE_TOLERANCE = 1e-20
 #: Digits of the mpmath evaluations.
 DIGITS = 40
-#: Largest 2-form (sympy operation count) for which monopole_charge tries sympy's exact integral.
-SYMBOLIC_INTEGRAL_MAX_OPS = 40
-#: Base point of the line integral for ln ρ (inside (0, π/2)², where angle charts are regular).
-BASE_POINT = (sp.Rational(7, 10), sp.Rational(2, 5))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -105,36 +117,6 @@ def _bounded(fn: Callable[..., Any], args: tuple[Any, ...], timeout: float) -> t
         return "done", outcome.value, outcome.seconds
     return ("error" if outcome.status == "error" else "timeout"), outcome.message, outcome.seconds
 
-
-def _weierstrass(expr: sp.Expr, q: Sequence[sp.Symbol]) -> sp.Expr | None:
-    """``expr`` with sin qᵢ = 2tᵢ/(1+tᵢ²), cos qᵢ = (1−tᵢ²)/(1+tᵢ²) (after ``expand_trig``); None if
-    a qᵢ survives inside a function (then the substitution does not make ``expr`` rational)."""
-    e = expr.replace(sp.tan, lambda x: sp.sin(x) / sp.cos(x)).replace(sp.cot, lambda x: sp.cos(x) / sp.sin(x))
-    e = e.replace(sp.sec, lambda x: 1 / sp.cos(x)).replace(sp.csc, lambda x: 1 / sp.sin(x))
-    e = sp.expand_trig(e)
-    subs = {}
-    for i, qi in enumerate(q):
-        t = sp.Dummy(f"t{i + 1}")
-        subs[sp.sin(qi)] = 2 * t / (1 + t**2)
-        subs[sp.cos(qi)] = (1 - t**2) / (1 + t**2)
-    e = e.xreplace(subs)
-    if any(f.has(*q) for f in e.atoms(sp.Function)):
-        return None
-    return e
-
-
-def rational_trig_is_zero(expr: sp.Expr, q: tuple[sp.Symbol, ...]) -> bool | None:
-    """Exact decision of ``expr ≡ 0`` for ``expr`` rational in q, sin qᵢ, cos qᵢ and the parameters
-    (t = tan(q/2), common denominator, numerator expanded). None if ``expr`` is not of that form."""
-    e = _weierstrass(expr, q)
-    if e is None:
-        return None
-    numerator = sp.expand(sp.numer(sp.together(e)))
-    if numerator == 0:
-        return True
-    if any(isinstance(a, sp.Pow) and not a.exp.is_Integer for a in numerator.atoms(sp.Pow)):
-        return None  # algebraic parts: a non-zero expanded numerator proves nothing
-    return False
 
 
 def _symbols_of(expr: sp.Expr) -> sp.Expr:
@@ -342,145 +324,6 @@ def _flow_fields(L: sp.Expr, q: Sequence[sp.Symbol], v: Sequence[sp.Symbol], S: 
     brackets_py = [f.xreplace(at) for f in bracket.hamiltonian_vector_field(H_bar)]
     theorem_1 = [-f for f in brackets_py]
     return flow, theorem_1, brackets_py
-
-
-# --------------------------------------------------------------------------------------------------
-# the density
-
-
-def _reduce_cos_squares(expr: sp.Expr, q: Sequence[sp.Symbol]) -> sp.Expr:
-    """``cos(qᵢ)^k → cos(qᵢ)^(k mod 2) (1 − sin²qᵢ)^(k div 2)``, expanded: a normal form modulo
-    sin² + cos² = 1, so that factoring does not split sin² into (1 − cos)(1 + cos)."""
-    def reduce(e: sp.Expr) -> sp.Expr:
-        for qi in q:
-            e = e.replace(lambda x, qi=qi: x.is_Pow and x.base == sp.cos(qi) and x.exp.is_Integer and x.exp >= 2,
-                          lambda x, qi=qi: sp.cos(qi) ** (x.exp % 2) * (1 - sp.sin(qi) ** 2) ** (x.exp // 2))
-        return e
-
-    return sp.expand(reduce(sp.expand(expr)))
-
-
-def _candidate_factors(exprs: Sequence[sp.Expr], q: tuple[sp.Symbol, sp.Symbol]) -> list[sp.Expr]:
-    """Irreducible factors (polynomials in sin qᵢ, cos qᵢ, q and the parameters) of the numerators
-    and denominators of ``exprs``, plus sin qᵢ, cos qᵢ, qᵢ: the basis of the ansatz ρ = Π fⱼ^kⱼ."""
-    out: list[sp.Expr] = []
-
-    def add(f: sp.Expr) -> None:
-        _, f = f.as_independent(*q, as_Add=False)
-        if f.has(*q) and f not in out and sp.expand(-f) not in out:
-            out.append(f)
-
-    for e in exprs:
-        for part in sp.fraction(sp.together(e)):
-            if part.has(*q):
-                for f, _ in sp.factor_list(_reduce_cos_squares(part, q))[1]:
-                    add(f)
-    for qi in q:
-        if any(e.has(sp.sin(qi), sp.cos(qi), sp.tan(qi)) for e in exprs):
-            add(sp.sin(qi))
-            add(sp.cos(qi))
-        add(qi)
-    return out
-
-
-def _density_ansatz(A1: sp.Expr, A2: sp.Expr, extra: tuple[sp.Expr, ...], q: tuple[sp.Symbol, sp.Symbol],
-                    values: tuple[tuple[sp.Symbol, float], ...]) -> tuple[sp.Expr, str] | None:
-    """ρ = Π fⱼ^kⱼ exp(α₁q₁ + α₂q₂) with rational kⱼ fitted by least squares at random points to
-    ∂ ln ρ/∂q₁ = A₂, ∂ ln ρ/∂q₂ = −A₁, then proved exactly. None if no such ρ is found."""
-    import scipy.linalg
-
-    factors = _candidate_factors((A1, A2) + extra, q)
-    names = [s for s, _ in values]
-    par = [x for _, x in values]
-    targets = [A2, -A1]
-    rows = [[sp.diff(f, qi) / f for f in factors] for qi in q]
-    fn = sp.lambdify(list(q) + names, rows[0] + rows[1] + targets, modules="numpy")
-    nf = len(factors)
-    M, y = [], []
-    for q1, q2 in np.random.default_rng(7).uniform(0.2, 1.35, (3 * (nf + 2) + 6, 2)):
-        vals = np.asarray(fn(q1, q2, *par), dtype=float)
-        M += [list(vals[:nf]) + [1.0, 0.0], list(vals[nf:2 * nf]) + [0.0, 1.0]]
-        y += [vals[2 * nf], vals[2 * nf + 1]]
-    M_arr, y_arr = np.array(M), np.array(y)
-    if not (np.all(np.isfinite(M_arr)) and np.all(np.isfinite(y_arr))):
-        return None
-    # independent columns (column-pivoted QR), then the unique least-squares solution on them
-    _, R, piv = scipy.linalg.qr(M_arr, pivoting=True, mode="economic")
-    diag = np.abs(np.diag(R))
-    keep = sorted(piv[: int(np.sum(diag > 1e-9 * diag[0]))]) if diag.size and diag[0] > 0 else []
-    k = np.zeros(nf + 2)
-    if keep:
-        k[keep] = np.linalg.lstsq(M_arr[:, keep], y_arr, rcond=None)[0]
-    if np.linalg.norm(M_arr @ k - y_arr) > 1e-7 * max(np.linalg.norm(y_arr), 1e-300):
-        return None
-    exps = []
-    for kj in k[:nf]:
-        frac = Fraction(float(kj)).limit_denominator(24)
-        if abs(float(frac) - kj) > 1e-6:
-            return None
-        exps.append(sp.Rational(frac.numerator, frac.denominator))
-    used = [(e, f) for e, f in zip(exps, factors) if e != 0]
-    # α: the rest of the 1-form must be constant; take it exactly at the base point
-    alpha = []
-    for i, (qi, target) in enumerate(zip(q, targets)):
-        if abs(k[nf + i]) < 1e-9 * max(1.0, float(np.max(np.abs(y_arr)))):
-            alpha.append(sp.Integer(0))
-        else:
-            rest = target - sum((e * sp.diff(f, qi) / f for e, f in used), sp.Integer(0))
-            alpha.append(sp.cancel(rest.xreplace(dict(zip(q, BASE_POINT)))))
-    log_rho = sum((e * sp.log(f) for e, f in used), sp.Integer(0)) + alpha[0] * q[0] + alpha[1] * q[1]
-    for qi, target in zip(q, targets):  # an exact proof that d ln ρ = A₂ dq₁ − A₁ dq₂
-        if rational_trig_is_zero(sp.diff(log_rho, qi) - target, q) is not True:
-            return None
-    # each factor's sign chosen positive at the base point (ρ is defined up to a constant factor)
-    at_base = sp.lambdify(list(q) + names, [f for _, f in used], modules="mpmath")(*BASE_POINT, *par)
-    pieces = [((-f if float(s) < 0 else f) ** e) for (e, f), s in zip(used, at_base)]
-    rho = sp.Mul(*pieces) * sp.exp(alpha[0] * q[0] + alpha[1] * q[1])
-    return rho, ("ansatz rho = prod f_j^k_j exp(alpha.q) over the irreducible factors of A1, A2 and det G; exponents "
-                 "fitted at random points, rationalized, and d ln rho = A2 dq1 - A1 dq2 proved exactly")
-
-
-def _density_by_integration(A1: sp.Expr, A2: sp.Expr,
-                            q: tuple[sp.Symbol, sp.Symbol]) -> tuple[sp.Expr, str, sp.Expr] | None:
-    """ln ρ = ∫A₂ dq₁ + g(q₂), g′ = −A₁ − ∂/∂q₂ ∫A₂ dq₁ (sympy ``integrate``); None if sympy
-    leaves an integral or g′ depends on q₁."""
-    F = sp.integrate(sp.cancel(A2), q[0])
-    if F.has(sp.Integral):
-        return None
-    h = sp.cancel(-A1 - sp.diff(F, q[1]))
-    if h.has(q[0]):
-        h = sp.simplify(h)
-        if h.has(q[0]):
-            return None
-    G = sp.integrate(h, q[1])
-    if G.has(sp.Integral):
-        return None
-    return (sp.exp(F + G), "ln rho = integral of A2 dq1 + g(q2), g' = -A1 - d/dq2 integral of A2 dq1 (sympy integrate)",
-            F + G)
-
-
-def _density_line_integral(A1: sp.Expr, A2: sp.Expr, q: tuple[sp.Symbol, sp.Symbol]) -> tuple[sp.Expr, str, sp.Expr]:
-    """ln ρ(q) = ∫₀¹ [A₂ (q₁ − q₁⁰) − A₁ (q₂ − q₂⁰)](q⁰ + s(q − q⁰)) ds, the straight segment from
-    the base point q⁰ (valid on a star-shaped domain around it), in closed form if sympy finds one."""
-    s = sp.Dummy("s")
-    on_segment = {qi: q0 + s * (qi - q0) for qi, q0 in zip(q, BASE_POINT)}
-    integrand = A2.xreplace(on_segment) * (q[0] - BASE_POINT[0]) - A1.xreplace(on_segment) * (q[1] - BASE_POINT[1])
-    integral = sp.integrate(integrand, (s, 0, 1))
-    how = "left as an integral (no closed form found)" if integral.has(sp.Integral) else "evaluated by sympy"
-    return sp.exp(integral), (f"ln rho = line integral of A2 dq1 - A1 dq2 along the segment from q0 = "
-                              f"({BASE_POINT[0]}, {BASE_POINT[1]}), {how}"), integral
-
-
-def _density_equations_hold(log_rho: sp.Expr, A1: sp.Expr, A2: sp.Expr, q: tuple[sp.Symbol, sp.Symbol]) -> bool | None:
-    """Whether ∂ ln ρ/∂q₁ = A₂ and ∂ ln ρ/∂q₂ = −A₁ identically (None: undecided)."""
-    verdicts = []
-    for qi, target in zip(q, (A2, -A1)):
-        e = sp.diff(log_rho, qi) - target
-        verdict = rational_trig_is_zero(e, q)
-        if verdict is None and not e.has(sp.Integral):
-            verdict = True if sp.simplify(e) == 0 else None
-        verdicts.append(verdict)
-    return False if False in verdicts else (True if all(verdicts) else None)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -739,6 +582,7 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
                 monopole=None, equations=dict(EQUATIONS), **base)
         for attempt in (_density_by_integration, _density_line_integral):
             if remaining() <= 0:
+                bounded.cut_short()
                 break
             status, found, secs = _bounded(attempt, (A1, A2, q), remaining())
             if status != "done" or found is None:
@@ -788,6 +632,8 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
     if domain is not None:
         W = None if shift is None else tuple(
             sp.sympify(w).xreplace({multiplier_symbol: N} if multiplier_symbol is not None else {}) for w in shift)
+        if remaining() <= 0:
+            bounded.cut_short()  # sympy's exact integral not tried for lack of budget
         monopole = monopole_charge(S_bar, q, domain, sampler.values, shift=W,  # type: ignore[arg-type]
                                    symbolic_budget_s=min(3.0, remaining()))
         monopole["detail"] += sampler.note()
@@ -801,106 +647,3 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
         measure_exists=measure_exists, integrability_condition=integrability, reason=reason,
         density=rho, reducing_multiplier=N, S_bar=S_bar, hamiltonian=H_bar, bracket=bracket,
         verification=verification, monopole=monopole, equations=equations, **base)
-
-
-# --------------------------------------------------------------------------------------------------
-# monopoles
-
-
-def _symbolic_area_integral(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
-                            domain: tuple[tuple[sp.Expr, sp.Expr], tuple[sp.Expr, sp.Expr]]) -> sp.Expr | None:
-    (a, b), (c, d) = domain
-    value = sp.integrate(S_bar, (q[1], c, d), (q[0], a, b))
-    return None if value.has(sp.Integral) else value
-
-
-def monopole_charge(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
-                    domain: tuple[tuple[float, float], tuple[float, float]],
-                    parameters: Mapping[sp.Symbol, float] | None = None, symbolic_budget_s: float = 3.0,
-                    shift: tuple[sp.Expr, sp.Expr] | None = None) -> dict[str, Any]:
-    """∫ S̄ dq₁∧dq₂ over the chart ``domain`` (text after eq. 2704-9).
-
-    If the chart covers a compact surface up to a set of measure zero (Euler angles θ ∈ (0, π),
-    φ ∈ (0, 2π) on S²) and S̄ dq₁∧dq₂ is a smooth 2-form there, it is exact iff its integral is 0;
-    if not, the generalized potential W (dW = Ω) has singularities (monopoles) and no global
-    canonical form exists.
-
-    Smoothness is the catch in angle charts: if the momenta p are not smooth fibre coordinates of
-    T*M (e.g. after a Routh reduction they differ from them by a potential W(q) singular at the
-    poles, a Dirac string), the smooth gyroscopic form belongs to p̃ = p − W, for which eq. (2704-9)
-    gives {p̃₁, p̃₂} = S̄ + ∂W₂/∂q₁ − ∂W₁/∂q₂. Pass ``shift=(W₁, W₂)`` to integrate that form instead;
-    the chart integral of S̄ alone is then reported as ``"integral_S_bar"``.
-
-    Parameters
-    ----------
-    S_bar : S̄(q) of the bracket (2704-9).
-    q : (q₁, q₂).
-    domain : ((q₁ min, q₁ max), (q₂ min, q₂ max)); multiples of π are recognised for sympy.
-    parameters : values of every other symbol.
-    symbolic_budget_s : seconds for sympy's attempt at the exact integral (≤ 0: no attempt).
-    shift : (W₁, W₂) with p̃ = p − W smooth fibre coordinates, or None.
-
-    Returns
-    -------
-    dict
-        ``{"integral": float, "exact": bool, "detail": str}`` plus ``"absolute_integral"`` (of
-        |form|, the scale of "zero"), ``"error_estimate"``, ``"form"`` (the integrand), and
-        ``"symbolic"`` if sympy found the integral.
-
-    Raises
-    ------
-    ValueError
-        If a symbol other than q has no value.
-    """
-    from scipy.integrate import dblquad
-
-    par = {sp.sympify(k): float(val) for k, val in (parameters or {}).items()}
-    S_bar = sp.sympify(S_bar)
-    form = S_bar
-    if shift is not None:
-        W1, W2 = (sp.sympify(x) for x in shift)
-        form = S_bar + sp.diff(W2, q[0]) - sp.diff(W1, q[1])
-    missing = form.free_symbols - set(q) - set(par)
-    if missing:
-        raise ValueError(f"S_bar has symbols without a value: {', '.join(sorted(map(str, missing)))}")
-    (a, b), (c, d) = [(float(lo), float(hi)) for lo, hi in domain]
-
-    def integrate(expr: sp.Expr) -> tuple[float, float, float]:
-        names = sorted(expr.free_symbols - set(q), key=str)
-        f = sp.lambdify(list(q) + names, expr, modules="numpy")
-        values = [par[s] for s in names]
-        # dblquad integrates func(y, x) with x outer: outer q₁, inner q₂
-        value, err = dblquad(lambda y, x: float(f(x, y, *values)), a, b, c, d, epsabs=1e-13, epsrel=1e-11)
-        absolute, _ = dblquad(lambda y, x: abs(float(f(x, y, *values))), a, b, c, d, epsabs=1e-13, epsrel=1e-9)
-        return value, absolute, err
-
-    value, absolute, err = integrate(form)
-    exact = bool(abs(value) <= 1e-9 * absolute + 1e-14)
-    what = "S_bar" if shift is None else "S_bar + dW2/dq1 - dW1/dq2"
-    out: dict[str, Any] = {
-        "integral": float(value), "exact": exact, "absolute_integral": float(absolute), "error_estimate": float(err),
-        "form": sp.sstr(form),
-        "detail": (f"integral of ({what}) d{q[0]} d{q[1]} over {q[0]} in ({a:g}, {b:g}), {q[1]} in ({c:g}, {d:g}) "
-                   f"by scipy dblquad = {value:.12g} (its absolute value integrates to {absolute:.6g}); if the chart "
-                   "covers a compact surface (e.g. Euler angles on S^2) and the form is smooth there, the closed "
-                   "2-form is exact iff the integral is 0: "
-                   + ("exact, a global generalized potential W exists" if exact else
-                      "not exact: W has singularities (monopoles), no global canonical Hamiltonian form")),
-    }
-    if shift is not None:
-        out["integral_S_bar"] = float(integrate(S_bar)[0])
-        out["detail"] += (f"; the chart integral of S_bar alone is {out['integral_S_bar']:.12g} (the momenta p differ "
-                          "from smooth fibre coordinates by W)")
-    if symbolic_budget_s <= 0:
-        return out
-    if sp.count_ops(form) > SYMBOLIC_INTEGRAL_MAX_OPS:
-        # sympy's integrate does not return on large forms (the ball's S_bar), and a thread past its
-        # budget cannot be stopped: it would hold the interpreter for the rest of the process
-        out["detail"] += f"; sympy's exact integral not attempted (form has {sp.count_ops(form)} operations)"
-        return out
-    exact_domain = tuple(tuple(sp.nsimplify(x, [sp.pi]) for x in pair) for pair in domain)
-    status, sym, _ = _bounded(_symbolic_area_integral, (form, q, exact_domain), symbolic_budget_s)
-    if status == "done" and sym is not None:
-        out["symbolic"] = sp.sstr(sym)
-        out["detail"] += f"; sympy: {sp.sstr(sym)}"
-    return out

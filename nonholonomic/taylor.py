@@ -159,10 +159,10 @@ class TaylorSystem:
 def taylor_system(system: MechanicalSystem) -> TaylorSystem:
     """The heyoka form of ``system`` (once per system and process; remembered across processes when a
     memo is installed, :mod:`nonholonomic.memo`)."""
-    if memo.installed():
-        definition = memo.key_of("definition-of", system)
+    definition = memo.key_of("definition-of", system) if memo.installed() else None
+    if definition is not None:
         form = memo.remember("taylor-form", definition, lambda: _taylor_form(system))
-    else:
+    else:  # no memo, or a definition that does not pickle: derived here
         form = _taylor_form(system)
     return TaylorSystem(system=system, **form)
 

@@ -90,7 +90,8 @@ class EnsembleRequest(BaseModel):
     samples: int = Field(2, ge=2, description="sample times per member (both ends included)")
     checks: list[Literal["integrals", "measure"]] = Field(
         default_factory=lambda: ["integrals"],
-        description="evidence per member, at its samples and 64 equally spaced check points (not every step)")
+        description="evidence per member (the integrals at its samples and 64 equally spaced check points, "
+                    "not every step)")
     poincare: PoincareRequest | None = None
     lyapunov: LyapunovRequest | None = None
     integrator: IntegratorOptions = Field(default_factory=IntegratorOptions)

@@ -15,6 +15,7 @@ from celery.signals import (
     task_postrun,
     task_received,
     task_revoked,
+    worker_init,
     worker_process_init,
     worker_process_shutdown,
     worker_ready,
@@ -93,6 +94,17 @@ def _beat(key: str, value: str) -> None:
     from workers.heartbeat import Heartbeat
 
     _heartbeats.append(Heartbeat(get_settings().redis_url or DEFAULT_REDIS_URL, key, lambda: value).start())
+
+
+@worker_init.connect
+def _fingerprint_code(**_: Any) -> None:
+    """The memo's fingerprints of the code as the main process loaded it, before the pool forks: a pool
+    process started later (recycled past its memory bound) runs this code and must key its results by
+    it, even if the files on disk changed since."""
+    from workers.disk_memo import fingerprint, response_fingerprint
+
+    fingerprint()
+    response_fingerprint()
 
 
 @worker_process_init.connect

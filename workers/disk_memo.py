@@ -39,7 +39,7 @@ log = logging.getLogger(__name__)
 
 MAGIC = b"nonholonomic-memo 1\n"
 #: Libraries whose versions are part of the fingerprint (their objects are pickled, or their results cached).
-LIBRARIES = ("sympy", "heyoka", "numpy", "mpmath")
+LIBRARIES = ("sympy", "heyoka", "numpy", "mpmath", "scipy")
 #: Saves between two checks of the folder's size.
 PRUNE_EVERY = 64
 
@@ -65,6 +65,21 @@ def fingerprint() -> str:
     return h.hexdigest()
 
 
+@lru_cache(maxsize=1)
+def response_fingerprint() -> str:
+    """SHA-256 of the code that shapes a whole remembered answer beyond the core: the HTTP layer, the
+    schemas and the workers (parsing, the response models, the report's assembly). Part of the keys of
+    remembered responses (a symbolic request's answer, the paper report), so that a change there is
+    never answered with a response shaped by the old code (or one the new models would refuse)."""
+    h = hashlib.sha256()
+    root = Path(nonholonomic.__file__).resolve().parent.parent
+    for folder in ("schemas", "service", "workers"):
+        for path in sorted((root / folder).rglob("*.py")):
+            h.update(str(path.relative_to(root)).encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()
+
+
 def versions() -> dict[str, str]:
     """The versions a remembered value was computed with (shown beside cached results)."""
     out = {"nonholonomic": nonholonomic.__version__, "code": fingerprint()[:16]}
@@ -78,7 +93,7 @@ def versions() -> dict[str, str]:
 
 #: Details of a check that a budget or a busy process left undecided: such a result depends on the
 #: machine's load, not only on the code, and is not remembered.
-LOAD_DEPENDENT = ("did not finish within", "not started:")
+LOAD_DEPENDENT = ("did not finish within", "not started:", "budget exhausted", "within the budget")
 
 
 def deterministic(result: object) -> bool:
@@ -90,7 +105,12 @@ def deterministic(result: object) -> bool:
 
 def default_directory() -> Path:
     """``$XDG_CACHE_HOME/nonholonomic``, else ``~/.cache/nonholonomic``."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    base = os.environ.get("XDG_CACHE_HOME")
+    if not base:
+        try:
+            base = str(Path.home() / ".cache")
+        except RuntimeError:  # no HOME and no passwd entry (a container's arbitrary user)
+            base = os.path.join(tempfile.gettempdir(), f"nonholonomic-{os.getuid()}")
     return Path(base) / "nonholonomic"
 
 
@@ -105,6 +125,16 @@ class DiskMemo:
         self.saves = 0  # values derived and written
         self._lock = threading.Lock()
         self.directory.mkdir(parents=True, exist_ok=True, mode=0o700)
+        self._check_owner()
+
+    def _check_owner(self) -> None:
+        """Refuse a folder another user owns or may write to: its files are unpickled."""
+        info = self.directory.stat()
+        if hasattr(os, "getuid") and info.st_uid != os.getuid():
+            raise PermissionError(f"{self.directory} belongs to another user (uid {info.st_uid}): not used")
+        if info.st_mode & 0o022:
+            raise PermissionError(f"{self.directory} is writable by other users (mode {info.st_mode & 0o777:o}): "
+                                  "not used (chmod 700 it)")
 
     def path(self, key: str) -> Path:
         """Where the value of ``key`` lives."""
@@ -150,6 +180,7 @@ class DiskMemo:
         header = json.dumps({"key": key, "code": self.code, "length": len(data),
                              "sha256": hashlib.sha256(data).hexdigest()}).encode()
         path = self.path(key)
+        tmp = None
         try:
             fd, tmp = tempfile.mkstemp(dir=self.directory, prefix=".", suffix=".partial")
             with os.fdopen(fd, "wb") as f:
@@ -157,6 +188,8 @@ class DiskMemo:
             os.replace(tmp, path)
         except OSError as exc:  # a full or read-only disk: the value is computed again next time
             log.warning("could not remember %s in %s: %s", key, self.directory, exc)
+            if tmp is not None:
+                self._unlink(Path(tmp))
             return
         with self._lock:
             self.saves += 1
@@ -170,9 +203,21 @@ class DiskMemo:
     def prune(self) -> None:
         """Delete the least recently used files until the folder holds at most ``max_bytes`` (and files a
         process left half-written when it was killed, after an hour)."""
+        files: list[tuple[float, int, Path]] = []
+        partial: list[Path] = []
         try:
-            files = [(p.stat().st_mtime, p.stat().st_size, p) for p in self.directory.glob("*.memo")]
-            partial = [p for p in self.directory.glob(".*.partial") if p.stat().st_mtime < time.time() - 3600]
+            for p in self.directory.glob("*.memo"):
+                try:  # another process may delete a file between the listing and its stat
+                    info = p.stat()
+                except OSError:
+                    continue
+                files.append((info.st_mtime, info.st_size, p))
+            for p in self.directory.glob(".*.partial"):
+                try:
+                    if p.stat().st_mtime < time.time() - 3600:
+                        partial.append(p)
+                except OSError:
+                    continue
         except OSError:
             return
         for path in partial:

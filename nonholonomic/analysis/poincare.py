@@ -17,15 +17,12 @@ output (``update_d_output``) at the event time, as heyoka's own Poincaré-sectio
 integrator serves every level; it is compiled once per (system, surface, direction, tolerance)
 and process, and copied once per thread.
 
-The event time reaches Python rounded to a double, so the dense-output state is off the exact
-root by up to half an ulp of ``t`` (``|f|·ulp(t)/2``, ~1e-13 at t ~ 1000). One Newton step along
-the flow, done for all crossings at once by the surface's compiled function,
-``δ = −(S(x) − value)/(∇S·f)``, ``x ← x + f(x) δ``, ``t ← t + δ``, ``τ ← τ + ρ δ``, moves each point
-back onto the surface (``δ`` is accepted only while it is at the level of that rounding; a
-nearly tangent crossing keeps its unrefined point and a warning says so).
+The event time reaches Python rounded to a double; one Newton step along the flow moves each
+crossing back onto the surface (:mod:`.poincare_result`, where the step and its bounds are described).
 
 ``max_points`` stops the integration: the trajectory is propagated in segments of a number of
-steps (:func:`section`: 64 first, then at most 20 000 and not much beyond where the crossing rate
+steps (:func:`section`: 64 first when there is a ``progress`` to ask, else as many as ``max_points``
+crossings may need; then at most 20 000 and not much beyond where the crossing rate
 so far puts the ``max_points``-th crossing, and with a ``progress`` to ask, about 1 % of
 ``t_final`` but at least 256 steps; no step is cut short at a segment's end, so the steps are those
 of one uninterrupted propagation; :func:`section_batch`: segments of 1 % of ``t_final`` in time,

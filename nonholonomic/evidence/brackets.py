@@ -291,8 +291,9 @@ def casimir_checks(ps: PoissonStructure, budget_s: float = 20.0) -> list[tuple[s
     """
     deadline = time.monotonic() + budget_s
     # Start every proof first so that they share the budget.
-    for _, C in ps.casimirs:
-        casimir_symbolic(ps, C, 0.0)
+    with bounded.peeking():
+        for _, C in ps.casimirs:
+            casimir_symbolic(ps, C, 0.0)
     out = []
     for name, C in ps.casimirs:
         verdict, detail = casimir_symbolic(ps, C, deadline - time.monotonic())
@@ -361,8 +362,9 @@ def structure_evidence(ps: PoissonStructure, points: np.ndarray, parameters: np.
     deadline = time.monotonic() + budget_s
     X = _points(ps, points)
     p = _parameter_vector(ps, parameters)
-    for _, C in ps.casimirs:  # start the Casimir proofs alongside the Jacobi one
-        casimir_symbolic(ps, C, 0.0)
+    with bounded.peeking():  # start the Casimir proofs alongside the Jacobi one
+        for _, C in ps.casimirs:
+            casimir_symbolic(ps, C, 0.0)
     proven, detail = jacobi_symbolic(ps, budget_s=budget_s)
     residual = jacobi_pointwise(ps, X, p)
     items = [
@@ -520,9 +522,10 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
     # Start every proof; they share the budget.
     antisymmetry_key = ("antisymmetry",) + _key(ps)
     bounded.start(antisymmetry_key, _prove_antisymmetry, (P, tuple(names)))
-    jacobi_known = jacobi_symbolic(ps, 0.0)  # what is known at the call: all a budget of 0 may use
-    for C in candidates.values():
-        casimir_symbolic(ps, C, 0.0)
+    with bounded.peeking():
+        jacobi_known = jacobi_symbolic(ps, 0.0)  # what is known at the call: all a budget of 0 may use
+        for C in candidates.values():
+            casimir_symbolic(ps, C, 0.0)
 
     # Antisymmetry.
     verdict, detail, offending = bounded.verdict(
@@ -539,6 +542,8 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
     # Jacobi.
     remaining = deadline - time.monotonic()
     verdict, detail = jacobi_symbolic(ps, remaining) if remaining > 0 else jacobi_known
+    if verdict is None and remaining <= 0:
+        bounded.cut_short()  # no budget left for the proof
     jac_res = jacobi_pointwise(ps, X)
     finite = int(np.sum(_jacobi_kernel(ps).residuals(X, p)[1]))
     method = "symbolic"

@@ -58,7 +58,7 @@ def _prove(system: MechanicalSystem, density: sp.Expr) -> tuple[bool | None, str
     angles = tuple(sorted({x for f in numerator.atoms(sp.sin, sp.cos) for x in f.free_symbols
                            if x in system.state_symbols}, key=str))
     if angles:  # sin² + cos² = 1 is not seen by expand: decide it with t = tan(q/2)
-        from nonholonomic.reducing_multiplier import rational_trig_is_zero
+        from nonholonomic.rational_trig import rational_trig_is_zero
 
         verdict = rational_trig_is_zero(numerator, angles)
         if verdict is True:

@@ -107,7 +107,7 @@ def ball_multiplier() -> Row:
 def monopole() -> Row:
     claim = Claim(GENERAL, "For the ball with c != 0 the gyroscopic 2-form S_bar dq1^dq2 is not "
                   "exact on the sphere (a monopole); for c = 0 it is", "text after 2704-9")
-    from nonholonomic.reducing_multiplier import monopole_charge
+    from nonholonomic.monopole import monopole_charge
 
     result, sym, values = _ball_theorem_1()
     if result.monopole is None or result.S_bar is None:

@@ -79,7 +79,7 @@ def trig_identity(expr: sp.Expr, q: tuple[sp.Symbol, ...], values: dict[sp.Symbo
                   budget_s: float = PROOF_BUDGET_S) -> Check:
     """``expr ≡ 0`` in (q, parameters) decided exactly (t = tan(q/2), numerator expanded; parameters
     symbolic), with the largest |expr| at 40 random points (``values`` for the parameters) as residual."""
-    from nonholonomic.reducing_multiplier import rational_trig_is_zero
+    from nonholonomic.rational_trig import rational_trig_is_zero
 
     rng = np.random.default_rng(0)
     f = sp.lambdify(list(q) + list(values), expr, "numpy")

@@ -244,7 +244,7 @@ class EmbeddedBackend:
         w = self._warming
         detail = None if warm else (
             f"warm-up ({w.done} of {w.total or '?'} systems{f', now {w.now}' if w.now else ''}; "
-            f"{'first start: deriving and compiling, about a minute on 2 cores' if w.derived > w.read_back else 'from the cache'})"
+            f"{_warm_source(w)})"
             ": jobs would wait for it")
         store = "ok" if self.store.ping() else "unreachable"
         return {"ok": warm and store == "ok", "mode": self.mode, "broker": "none (embedded)", "store": store,
@@ -259,3 +259,12 @@ class EmbeddedBackend:
             event.set()
         self._pool.close(CLOSE_WAIT_S)
         self.store.close()
+
+
+def _warm_source(w: Any) -> str:
+    """Where the warm-up's systems come from, for ``/health``'s detail."""
+    if w.read_back > w.derived:
+        return "read back from the memo on disk"
+    if w.read_back == 0 and w.derived == 0:
+        return "starting"
+    return "deriving and compiling (first start, or no memo on disk: about a minute on 2 cores)"

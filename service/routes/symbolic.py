@@ -123,10 +123,11 @@ async def _run(http: Request, fn: Any, payload: dict[str, Any], budget_s: float,
     answered at once."""
     from nonholonomic import memo
     from service.isolated import GRACE_S, IsolatedTimeout, run_isolated
-    from workers.disk_memo import deterministic
+    from workers.disk_memo import deterministic, response_fingerprint
 
     # the same body, the same code and libraries: the same answer, remembered unless a budget cut it short
-    key = memo.key_of("symbolic-response", (fn.__name__, payload)) if memo.installed() else None
+    key = (memo.key_of("symbolic-response", (fn.__name__, payload, response_fingerprint()))
+           if memo.installed() else None)
     if key is not None:
         found, answer = await run_in_threadpool(memo.recall, key)
         if found:
@@ -134,8 +135,8 @@ async def _run(http: Request, fn: Any, payload: dict[str, Any], budget_s: float,
             return answer
     async with http.app.state.symbolic_pool.slot():
         try:
-            answer = await run_in_threadpool(run_isolated, fn, (payload,), budget_s + GRACE_S)
-            stored = key is not None and deterministic(answer)
+            answer, cut = await run_in_threadpool(run_isolated, _counting_cuts, (fn, payload), budget_s + GRACE_S)
+            stored = key is not None and cut == 0 and deterministic(answer)
             if stored:
                 await run_in_threadpool(memo.keep, key, answer)
             response.headers["Cache-Status"] = CACHE_MISS + ("; stored" if stored else "")
@@ -145,6 +146,16 @@ async def _run(http: Request, fn: Any, payload: dict[str, Any], budget_s: float,
         except IsolatedTimeout as exc:
             raise ProblemError(408, "Symbolic work timed out",
                                f"{exc}; lower the expressions' size or raise budget_s", TIMEOUT) from None
+
+
+def _counting_cuts(fn: Any, payload: dict[str, Any]) -> tuple[Any, int]:
+    """``fn(payload)`` in the child, and how many of its computations a budget left undone
+    (:func:`nonholonomic.bounded.cut_short_count`): only an answer with none is remembered."""
+    from nonholonomic import bounded
+
+    before = bounded.cut_short_count()
+    answer = fn(payload)
+    return answer, bounded.cut_short_count() - before
 
 
 def _verify_in_child(payload: dict[str, Any]) -> dict[str, Any]:

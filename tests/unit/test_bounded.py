@@ -52,3 +52,22 @@ def test_runaway_computations_are_capped(monkeypatch: pytest.MonkeyPatch) -> Non
     while bounded._running() and time.monotonic() < deadline:
         time.sleep(0.01)
     assert bounded.run(("test-bounded", "cap", 4), _slow, (release, 4), 5.0).status == "done"
+
+
+def test_every_computation_a_budget_or_a_busy_process_left_undone_is_counted(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The count that decides whether a whole answer may be remembered (a symbolic request's, the paper
+    report's): a timeout and a refusal move it, a finished computation does not."""
+    release = threading.Event()
+    try:
+        start = bounded.cut_short_count()
+        assert bounded.run(("test-bounded", "count", 0), _slow, (release, 0), 0.01).status == "timeout"
+        assert bounded.cut_short_count() == start + 1
+        monkeypatch.setattr(bounded, "MAX_RUNNING", bounded._running())
+        assert bounded.run(("test-bounded", "count", 1), _slow, (release, 1), 1.0).status == "busy"
+        assert bounded.cut_short_count() == start + 2
+        monkeypatch.undo()
+        release.set()
+        assert bounded.run(("test-bounded", "count", 0), _slow, (release, 0), 5.0).status == "done"
+        assert bounded.cut_short_count() == start + 2
+    finally:
+        release.set()

@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from nonholonomic import memo
 from workers.disk_memo import MAGIC, DiskMemo
 
@@ -152,3 +154,31 @@ def test_the_folder_is_pruned_least_recently_used_first(tmp_path):
     disk.load("k:0")  # read: recently used again
     disk.prune()
     assert sorted(i for i in range(5) if disk.path(f"k:{i}").exists()) == [0, 4]
+
+
+def test_a_folder_another_user_could_write_is_refused(tmp_path):
+    """Its files are unpickled: a folder writable by group or others is not used (nothing remembered)."""
+    from nonholonomic import memo as core_memo
+    from workers.disk_memo import install_disk_memo
+
+    open_folder = tmp_path / "open"
+    open_folder.mkdir()
+    os.chmod(open_folder, 0o777)
+    with pytest.raises(PermissionError, match="writable by other users"):
+        DiskMemo(open_folder, code="f" * 64)
+    previous = core_memo.installed()
+    try:
+        assert install_disk_memo(str(open_folder)) is None and core_memo.installed() is previous
+    finally:
+        core_memo.install(previous)
+
+
+def test_a_write_that_fails_leaves_no_partial_file(tmp_path, monkeypatch):
+    disk = DiskMemo(tmp_path, code="g" * 64)
+
+    def full(*_):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", full)
+    disk.save("k", b"payload")
+    assert list(tmp_path.iterdir()) == [] and disk.load("k") is None
