@@ -100,9 +100,14 @@ def _say(message: str) -> None:
 
 
 def _report(exc: ApiError) -> None:
-    _say(f"error: {exc.title}: {exc.detail}" if exc.detail else f"error: {exc.title}")
-    for e in exc.errors:
-        _say(f"  {e['field']}: {e['reason']}")
+    """The problem on stderr: its title and, field by field, its errors (a 422's detail only joins them:
+    printed too, each error came out twice), else its detail."""
+    if exc.errors:
+        _say(f"error: {exc.title}")
+        for e in exc.errors:
+            _say(f"  {e['field']}: {e['reason']}")
+    else:
+        _say(f"error: {exc.title}: {exc.detail}" if exc.detail else f"error: {exc.title}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

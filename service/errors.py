@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import difflib
 import json
 import logging
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
@@ -112,6 +114,13 @@ def _allowed_methods(request: Request) -> list[str]:
             if any(route.matches({**request.scope, "method": method})[0] == Match.FULL for route in routes)]
 
 
+def did_you_mean(given: str, known: Sequence[str]) -> str:
+    """``"; did you mean 'x'?"`` for the known name closest to a misspelled ``given`` (difflib's ratio
+    at least 0.6), else ``""``."""
+    close = difflib.get_close_matches(given, list(known), n=1, cutoff=0.6) if given else []
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
 def install_error_handlers(app: FastAPI) -> None:
     """Answer every error as ``application/problem+json`` (and say so in the OpenAPI document)."""
     from service.openapi import install_openapi
@@ -133,9 +142,12 @@ def install_error_handlers(app: FastAPI) -> None:
                                                                f"{err.get('ctx', {}).get('error', err['msg'])}"))
                 continue
             path = field_path(err["loc"], body)
+            reason = err["msg"]
             if err["type"] in ("union_tag_invalid", "union_tag_not_found"):
                 path += ".kind"  # the discriminator itself is the offending field
-            errors.append(FieldError(field=path, reason=err["msg"]))
+                ctx = err.get("ctx") or {}
+                reason += did_you_mean(str(ctx.get("tag", "")), re.findall(r"'([^']*)'", str(ctx.get("expected_tags", ""))))
+            errors.append(FieldError(field=path, reason=reason))
         return _respond(invalid_request(errors).problem, request)
 
     @app.exception_handler(StarletteHTTPException)

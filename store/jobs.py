@@ -8,6 +8,7 @@ only act on a job that has not ended). Finished jobs are deleted ``ttl_s`` after
 
 from __future__ import annotations
 
+import logging
 import zlib
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -22,6 +23,8 @@ from sqlalchemy.orm import Session, sessionmaker
 from store.expiry import Expiry
 from store.statements import autocommit, changed_one
 from store.models import JobRow
+
+log = logging.getLogger(__name__)
 
 _JOBS = JobRow.__table__
 #: Statuses of a job that has not ended.
@@ -122,16 +125,26 @@ class JobStore:
         workers starting at once migrate one after the other."""
         from alembic import command
         from alembic.config import Config
+        from alembic.runtime.migration import MigrationContext
 
         if self.engine.dialect.name == "postgresql":
             ensure_database(self.url)
         config = Config()
         config.set_main_option("script_location", str(Path(__file__).parent / "migrations"))
+        # Alembic's INFO lines ("Context impl", "Will assume transactional DDL") came from every process
+        # and every pool process at each start: a worker's log was full of them. One line of ours instead,
+        # when the schema did change.
+        logging.getLogger("alembic").setLevel(logging.WARNING)
         with self.engine.begin() as connection:
             if connection.dialect.name == "postgresql":
                 connection.execute(text("SELECT pg_advisory_xact_lock(726457)"))
+            before = MigrationContext.configure(connection).get_current_revision()
             config.attributes["connection"] = connection
             command.upgrade(config, "head")
+            after = MigrationContext.configure(connection).get_current_revision()
+        if after != before:
+            log.info("job store %s migrated from revision %s to %s", self.engine.url.render_as_string(),
+                     before or "(empty)", after)
 
     def close(self) -> None:
         self.engine.dispose()

@@ -10,7 +10,7 @@ from nonholonomic.catalog import catalog, describe
 from nonholonomic.systems import SYSTEMS
 from schemas.catalog import Catalog, SystemDescription
 from schemas.problems import NOT_FOUND
-from service.errors import ProblemError, problem_responses
+from service.errors import ProblemError, did_you_mean, problem_responses
 from service.openapi import operation_id
 
 router = APIRouter(prefix="/v1/systems", tags=["systems"], generate_unique_id_function=operation_id)
@@ -26,5 +26,7 @@ def list_systems() -> dict[str, Any]:
             responses=problem_responses({404: "unknown system kind"}), summary="One kind of the catalog")
 def get_system(kind: str) -> dict[str, Any]:
     if kind not in SYSTEMS:
-        raise ProblemError(404, "Unknown system kind", f"no system kind {kind!r}; known: {sorted(SYSTEMS)}", NOT_FOUND)
+        raise ProblemError(404, "Unknown system kind",
+                           f"no system kind {kind!r}{did_you_mean(kind, list(SYSTEMS))}; known: {sorted(SYSTEMS)}",
+                           NOT_FOUND)
     return describe(kind)

@@ -67,6 +67,22 @@ def test_catalog_describes_the_ball(client):
 def test_unknown_kind_in_catalog_is_404(client):
     r = client.get("/v1/systems/suslov")
     assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
+    assert "did you mean" not in r.json()["detail"]  # nothing close to it
+    r = client.get("/v1/systems/chaplygin_bal")
+    assert r.status_code == 404 and "did you mean 'chaplygin_ball'?" in r.json()["detail"]
+
+
+def test_a_misspelled_kind_gets_a_did_you_mean(client):
+    r = client.post("/v1/jobs", json={"system": {"kind": "veselva"}, "t_final": 1.0})
+    assert r.status_code == 422
+    (kind,) = [e for e in r.json()["errors"] if e["field"] == "system.kind"]
+    assert kind["reason"].endswith("did you mean 'veselova'?")
+    r = client.post("/v1/jobs", json={"system": {"kind": "chaplygin_ball", "inertia": [2, 3, 4], "D": 0.5,
+                                                 "potential": {"kind": "linaer"}}, "t_final": 1.0})
+    (potential,) = [e for e in r.json()["errors"] if e["field"] == "system.potential.kind"]
+    assert potential["reason"].endswith("did you mean 'linear'?")
+    r = client.post("/v1/jobs", json={"system": {"kind": "pendulum"}, "t_final": 1.0})
+    assert "did you mean" not in r.json()["errors"][0]["reason"]
 
 
 def test_openapi_docs_are_served(client):

@@ -195,6 +195,14 @@ def test_cli_exit_codes_for_a_failed_job_and_a_server_error(tmp_path, capsys, mo
     assert main(["--url", "http://api", "systems"]) == 3
     assert capsys.readouterr().err == "error: Internal error: KeyError: the server failed; this is a bug\n"
 
+    _cli_against(monkeypatch, lambda request: httpx.Response(
+        422, json={"type": "/problems/invalid-request", "title": "Invalid request", "status": 422,
+                   "detail": "system.kind: unknown; t_final: must be > 0",
+                   "errors": [{"field": "system.kind", "reason": "unknown"}, {"field": "t_final", "reason": "must be > 0"}]}))
+    assert main(["--url", "http://api", "run", str(tmp_path / "spec.json")]) == 2
+    # each error once (the detail, which only joins them, is not printed beside them)
+    assert capsys.readouterr().err == "error: Invalid request\n  system.kind: unknown\n  t_final: must be > 0\n"
+
 
 def test_the_client_sends_its_api_key_as_a_bearer_token(monkeypatch):
     import httpx

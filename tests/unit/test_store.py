@@ -86,3 +86,18 @@ def test_expiry_deletes_only_ended_jobs_past_the_ttl(store):
         session.execute(update(JobRow).where(JobRow.id.in_(["old-done", "old-queued"])).values(created=0.0))
     assert store.delete_expired() == 1
     assert store.get("old-done") is None and store.get("old-queued") is not None and store.get("new-done") is not None
+
+
+def test_migrating_logs_one_line_when_the_schema_changes_and_nothing_from_alembic(tmp_path, caplog):
+    """A worker's pool processes each migrate at start: Alembic's INFO lines flooded its log."""
+    import logging
+
+    caplog.set_level(logging.INFO)
+    fresh = JobStore(f"sqlite:///{tmp_path / 'fresh.sqlite3'}", ttl_s=3600)
+    fresh.migrate()
+    assert not [r for r in caplog.records if r.name.startswith("alembic")]
+    ours = [r.getMessage() for r in caplog.records if r.name == "store.jobs"]
+    assert len(ours) == 1 and "migrated from revision (empty) to" in ours[0]
+    caplog.clear()
+    fresh.migrate()  # up to date: silent
+    assert not [r for r in caplog.records if r.name.startswith("alembic") or r.name == "store.jobs"]
