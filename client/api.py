@@ -229,22 +229,25 @@ class Client:
         """
         return str(self._json("POST", "/v1/jobs", json=request)["id"])
 
-    def job(self, job_id: str) -> dict[str, Any]:
+    def job(self, job_id: str, *, trajectory: bool = True) -> dict[str, Any]:
         """``GET /v1/jobs/{id}``: the job view.
 
         Parameters
         ----------
         job_id : str
+        trajectory : bool, default True
+            False: the summary view, a simulation's samples left out of ``result`` (its
+            ``trajectory_location`` says where they are; :meth:`trajectory` downloads them).
 
         Returns
         -------
         dict
             ``{id, status, progress, created_at, request, result, error}``.
         """
-        return self._json("GET", f"/v1/jobs/{job_id}")
+        return self._json("GET", f"/v1/jobs/{job_id}", params=None if trajectory else {"trajectory": "false"})
 
     def wait(self, job_id: str, *, timeout: float | None = None, poll: float = 0.2,
-             progress: Progress | None = None) -> dict[str, Any]:
+             progress: Progress | None = None, trajectory: bool = True) -> dict[str, Any]:
         """Poll a job until it succeeded, failed or was cancelled.
 
         Parameters
@@ -257,6 +260,8 @@ class Client:
         progress : callable, optional
             Called as ``progress(fraction, status)`` after each poll (the last call of a job that
             succeeded has fraction 1.0).
+        trajectory : bool, default True
+            Whether the returned view holds the samples (the polls never carry them: the summary view).
 
         Returns
         -------
@@ -270,7 +275,8 @@ class Client:
         TimeoutError
             If it is still queued or running after ``timeout``.
         """
-        return self._wait("job", self.job, job_id, timeout, poll, progress)
+        view = self._wait("job", lambda ident: self.job(ident, trajectory=False), job_id, timeout, poll, progress)
+        return self.job(job_id) if trajectory else view
 
     def result(self, job_id: str) -> dict[str, Any]:
         """The result of a succeeded job.

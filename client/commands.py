@@ -7,6 +7,7 @@ Each takes the parsed arguments and returns an exit code; errors are raised (:cl
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 from collections.abc import Callable, Sequence
@@ -114,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"job {job_id}\nlocation {api.url(f'/v1/jobs/{job_id}')}", flush=True)
         if not (args.wait or args.out or args.result):
             return 0
-        view = _wait(api.wait, job_id, f"job {job_id}")
+        # the samples only when the result is written whole (--out downloads them in their own format)
+        view = _wait(functools.partial(api.wait, trajectory=bool(args.result)), job_id, f"job {job_id}")
         print(job_summary(view))
         if args.result:
             Path(args.result).write_text(json.dumps(view["result"], indent=1) + "\n", encoding="utf-8")

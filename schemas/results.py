@@ -119,7 +119,9 @@ class SimulationResultModel(BaseModel):
     t_final: float
     tau_final: float | None
     time: TimeInfo
-    trajectory: Trajectory
+    trajectory: Trajectory | None = Field(None, description="the samples; left out of the summary view "
+                                                            "(GET /v1/jobs/{id}?trajectory=false)")
+    trajectory_location: str | None = Field(None, description="where the samples are, in the summary view")
     integrals: list[IntegralItem]
     checks: list[CheckItem]
     integration: IntegrationInfo

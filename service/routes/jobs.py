@@ -40,9 +40,15 @@ def _backend(request: Request) -> JobBackend:
     return request.app.state.backend
 
 
-def _view(record: JobRecord) -> dict[str, Any]:
+def _view(record: JobRecord, trajectory: bool = True) -> dict[str, Any]:
+    """The job as JSON; ``trajectory=False``: the summary view, a simulation's samples left out of
+    ``result`` (``result.trajectory_location`` says where they are)."""
+    result = record.result
+    if not trajectory and isinstance(result, dict) and "trajectory" in result:
+        result = {k: v for k, v in result.items() if k != "trajectory"}
+        result["trajectory_location"] = f"/v1/jobs/{record.id}/trajectory"
     return {"id": record.id, "status": record.status, "progress": record.progress, "created_at": record.created_at,
-            "request": record.request, "result": record.result, "error": record.error}
+            "request": record.request, "result": result, "error": record.error}
 
 
 @router.post("", status_code=202, operation_id="jobs-submit", response_model=JobAccepted,
@@ -66,8 +72,11 @@ async def submit_job(job: JobRequest, request: Request) -> JSONResponse:
 
 @router.get("/{job_id}", operation_id="jobs-get", response_model=JobView, responses=_ERRORS,
             summary="Status, progress and result of a job")
-def get_job(job_id: str, request: Request) -> JSONResponse:
-    return JSONResponse(_view(job_of(request, job_id)))
+def get_job(job_id: str, request: Request,
+            trajectory: bool = Query(True, description="false: the summary view, without the sampled trajectory "
+                                                       "(result.trajectory_location says where it is)")) -> JSONResponse:
+    """The job; a finished simulation's whole result, samples included, unless ``trajectory=false``."""
+    return JSONResponse(_view(job_of(request, job_id), trajectory))
 
 
 @router.get("/{job_id}/trajectory", operation_id="jobs-trajectory", response_model=TrajectoryExport,

@@ -44,6 +44,22 @@ def test_job_succeeds_with_the_core_numbers_and_the_design_fields(client):
     assert view["request"]["system"]["potential"] == {"kind": "linear", "a": [0.3, -0.2, 0.5]}
 
 
+def test_the_summary_view_leaves_the_samples_out_and_says_where_they_are(client):
+    location = submit(client, job(samples=2001))
+    whole = poll_job(client, location)
+    summary = client.get(location, params={"trajectory": "false"})
+    assert summary.status_code == 200
+    view = summary.json()
+    assert "trajectory" not in view["result"] and view["result"]["trajectory_location"] == location + "/trajectory"
+    # everything else as in the whole view, number for number
+    assert {k: v for k, v in view["result"].items() if k != "trajectory_location"} == {
+        k: v for k, v in whole["result"].items() if k != "trajectory"}
+    assert len(summary.content) * 10 < len(client.get(location).content)  # 2001 samples stay behind
+    samples = client.get(view["result"]["trajectory_location"]).json()
+    assert samples["t"] == whole["result"]["trajectory"]["t"] and samples["M"] == whole["result"]["trajectory"]["M"]
+    assert client.get(location, params={"trajectory": "maybe"}).status_code == 422
+
+
 def test_omega_may_replace_M_and_checks_may_be_chosen(client):
     view = poll_job(client, submit(client, job(initial_state={"omega": [0.3, -0.1, 0.2], "gamma": [0, 0.6, 0.8]},
                                                checks=["integrals"])))

@@ -86,6 +86,31 @@ def _views(*views: dict) -> httpx.MockTransport:
     return httpx.MockTransport(handler)
 
 
+def test_wait_polls_the_summary_view_and_fetches_the_samples_once():
+    """The polls ask for the summary view (no samples); the samples come in one last request, or not at
+    all with ``trajectory=False``."""
+    asked: list[str | None] = []
+    states = iter(["running", "succeeded", "succeeded", "succeeded", "succeeded"])
+
+    def handler(request: httpx.Request) -> httpx.Response:
+        summary = request.url.params.get("trajectory")
+        asked.append(summary)
+        result = {"t_final": 1.0, **({"trajectory_location": "/v1/jobs/j/trajectory"} if summary == "false"
+                                     else {"trajectory": {"t": [0.0, 1.0]}})}
+        status = next(states)
+        return httpx.Response(200, json={"id": "j", "status": status, "progress": 1.0 if status == "succeeded" else 0.5,
+                                         "result": result if status == "succeeded" else None})
+
+    with Client("http://api", transport=httpx.MockTransport(handler)) as client:
+        view = client.wait("j", poll=0.0)
+        assert asked == ["false", "false", None] and view["result"]["trajectory"] == {"t": [0.0, 1.0]}
+        asked.clear()
+        summary = client.wait("j", poll=0.0, trajectory=False)
+        assert asked == ["false"] and "trajectory" not in summary["result"]
+        asked.clear()
+        assert "trajectory" not in client.job("j", trajectory=False)["result"] and asked == ["false"]
+
+
 def test_wait_polls_until_done_and_reports_progress():
     transport = _views({"id": "j", "status": "queued", "progress": 0.0},
                        {"id": "j", "status": "running", "progress": 0.4},
@@ -240,7 +265,7 @@ def test_wait_honours_retry_after_of_a_429_and_503(monkeypatch):
     slept: list[float] = []
     monkeypatch.setattr(api_module.time, "sleep", slept.append)
     with Client("http://api.test", transport=httpx.MockTransport(lambda request: answers.pop(0))) as api:
-        assert api.wait("j")["status"] == "succeeded"
+        assert api.wait("j", trajectory=False)["status"] == "succeeded"  # the polls only
     assert slept == [2.0, 1.0]
     without = httpx.MockTransport(lambda request: httpx.Response(503, json={"title": "Unavailable", "status": 503}))
     with Client("http://api.test", transport=without) as api, pytest.raises(ApiError) as raised:
