@@ -215,7 +215,7 @@ class Client:
         Parameters
         ----------
         request : dict
-            ``{system, initial_state, t_final, samples, checks, ...}`` (see the README).
+            ``{system, initial_state, t_final, samples, checks, ...}`` (see docs/first-job.md).
 
         Returns
         -------

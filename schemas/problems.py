@@ -5,7 +5,7 @@ from __future__ import annotations
 from pydantic import BaseModel, Field
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
-#: Problem types (relative URIs, described in the README's "Errors" section).
+#: Problem types (relative URIs, described in docs/api.md, "Errors").
 INVALID_REQUEST = "/problems/invalid-request"
 NOT_FOUND = "/problems/not-found"
 CONFLICT = "/problems/conflict"
