@@ -44,6 +44,25 @@ LIBRARIES = ("sympy", "heyoka", "numpy", "mpmath", "scipy")
 PRUNE_EVERY = 64
 
 
+def _hash_sources(h: hashlib._Hash, base: Path, *folders: Path) -> None:
+    """Feed every ``*.py`` under ``folders`` (path relative to ``base``, then content) to ``h``, in order."""
+    for folder in folders:
+        for path in sorted(folder.rglob("*.py")):
+            h.update(str(path.relative_to(base)).encode())
+            h.update(path.read_bytes())
+
+
+def _library_versions() -> dict[str, str | None]:
+    """The installed version of each of :data:`LIBRARIES` (None: not installed)."""
+    out: dict[str, str | None] = {}
+    for name in LIBRARIES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
 @lru_cache(maxsize=1)
 def fingerprint() -> str:
     """SHA-256 of the core's source files, the library versions, Python's version and the machine.
@@ -52,15 +71,10 @@ def fingerprint() -> str:
     new file name: values of another version are never looked up.
     """
     h = hashlib.sha256()
-    root = Path(nonholonomic.__file__).resolve().parent
-    for path in sorted(root.rglob("*.py")):
-        h.update(str(path.relative_to(root)).encode())
-        h.update(path.read_bytes())
-    for name in LIBRARIES:
-        try:
-            h.update(f"{name}={metadata.version(name)}".encode())
-        except metadata.PackageNotFoundError:
-            h.update(f"{name}=none".encode())
+    core = Path(nonholonomic.__file__).resolve().parent
+    _hash_sources(h, core, core)
+    for name, version in _library_versions().items():
+        h.update(f"{name}={version or 'none'}".encode())
     h.update(f"python={sys.version}|{platform.machine()}|{sys.byteorder}".encode())
     return h.hexdigest()
 
@@ -73,21 +87,14 @@ def response_fingerprint() -> str:
     never answered with a response shaped by the old code (or one the new models would refuse)."""
     h = hashlib.sha256()
     root = Path(nonholonomic.__file__).resolve().parent.parent
-    for folder in ("schemas", "service", "workers"):
-        for path in sorted((root / folder).rglob("*.py")):
-            h.update(str(path.relative_to(root)).encode())
-            h.update(path.read_bytes())
+    _hash_sources(h, root, *(root / folder for folder in ("schemas", "service", "workers")))
     return h.hexdigest()
 
 
 def versions() -> dict[str, str]:
     """The versions a remembered value was computed with (shown beside cached results)."""
     out = {"nonholonomic": nonholonomic.__version__, "code": fingerprint()[:16]}
-    for name in LIBRARIES:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            pass
+    out.update({name: version for name, version in _library_versions().items() if version is not None})
     return out
 
 
