@@ -53,22 +53,36 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, s
     logs = tmp_path_factory.mktemp("queue-logs")
     queue = f"test-{uuid.uuid4().hex[:8]}"
     port = free_port()
-    worker = start_worker(TEST_REDIS_URL, queue, logs / "worker.log", extra_env=LIMITS)
+    # The API first, then the worker: with warm caches a worker is warm within a second, so the states
+    # before it (no worker; a worker still compiling) are set up here rather than raced for.
+    from workers.heartbeat import PREFIX
+
     api = start_api(port, logs / "api.log", {"REDIS_URL": TEST_REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS})
+    worker = None
     base = f"http://127.0.0.1:{port}"
     try:
         wait_until(lambda: httpx.get(f"{base}/health", timeout=5).status_code in (200, 503), 60, "the API")
-        first = httpx.get(f"{base}/health", timeout=5)
+        no_worker = httpx.get(f"{base}/health", timeout=5)
+        # A worker's heartbeat before its warm-up ends: it consumes the queue with no warm process.
+        cold = f"{PREFIX}worker:compiling:1"
+        store.set(cold, '{"name": "compiling@elsewhere", "queues": ["%s"]}' % queue, ex=30)
+        seen: list[httpx.Response] = []  # /health may answer with a check up to 0.25 s old: poll
+        wait_until(lambda: "warm-up" in (seen.append(httpx.get(f"{base}/health", timeout=5)) or seen[-1].text),
+                   20, "/health to see the compiling worker")
+        compiling = seen[-1]
+        store.delete(cold)
+        worker = start_worker(TEST_REDIS_URL, queue, logs / "worker.log", extra_env=LIMITS)
         wait_healthy(base, timeout=180)
         with httpx.Client(base_url=base, timeout=10) as client:
-            client.first_health = first  # type: ignore[attr-defined]
+            client.before_worker = (no_worker, compiling)  # type: ignore[attr-defined]
             yield client, store, queue
     except Exception:
         print(_dump_logs(logs))
         raise
     finally:
         stop(api)
-        stop(worker)
+        if worker is not None:
+            stop(worker)
         store.flushdb()
 
 
@@ -80,12 +94,15 @@ def test_health_reports_broker_and_worker(queue_stack):
 
 
 def test_health_is_503_until_a_worker_process_is_warm(queue_stack):
-    """The issue's case: /health said 200 while the worker still compiled for 17 s. The worker compiles
-    for several seconds after the API is up: meanwhile /health is 503 saying why."""
-    client, _, _ = queue_stack
-    first = client.first_health
-    assert first.status_code == 503 and first.json()["status"] == "degraded", first.text
-    assert "warm-up" in first.json()["detail"] or "no worker consumes" in first.json()["detail"]
+    """The issue's case: /health said 200 while the worker still compiled for 17 s. Before any worker
+    consumes the queue, and while the only one has no warm process, /health is 503 saying why."""
+    client, _, queue = queue_stack
+    no_worker, compiling = client.before_worker
+    for health in (no_worker, compiling):
+        assert health.status_code == 503 and health.json()["status"] == "degraded", health.text
+    assert f"no worker consumes the queue '{queue}'" in no_worker.json()["detail"]
+    assert "warm-up" in compiling.json()["detail"]
+    assert compiling.json()["workers"]["compiling@elsewhere"] == {"queues": [queue], "warm_processes": 0}
 
 
 def test_health_reads_the_heartbeats_and_names_no_host(queue_stack):
