@@ -3,7 +3,7 @@
 Run from the repository root::
 
     .venv/bin/python bench/science.py --quick            # ~1 min: every study, small and short
-    .venv/bin/python bench/science.py                    # ~10 min on 2 cores: the numbers of bench/SCIENCE.md
+    .venv/bin/python bench/science.py                    # ~10 min on 2 cores: the numbers of docs/science.md
     .venv/bin/python bench/science.py --out /tmp/science # also the section CSVs (the API's export), the
                                                          # requests, the numbers as JSON and, if matplotlib
                                                          # is importable, PNG plots of the sections

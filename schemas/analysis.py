@@ -19,7 +19,7 @@ class PoincareRequest(BaseModel):
     """A Poincaré section of the orbit: the points where ``surface(x) = value`` is crossed."""
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [
-        {"surface": "gamma3", "value": 0.0, "direction": "increasing", "coordinates": ["gamma1", "gamma2"],
+        {"surface": "gamma3", "value": 0.0, "direction": "increasing", "coordinates": ["M1", "M2"],
          "max_points": 10000}]})
 
     surface: str = Field(max_length=2000, description="expression in the state components (M1, gamma3, omega2, x1, "
@@ -87,6 +87,79 @@ class LyapunovRequest(BaseModel):
             found.append(FieldProblem(f"{prefix}.interval", f"must be at most t_final - transient = "
                                                             f"{t_final - self.transient:g}"))
         return found
+
+
+class SectionResult(BaseModel):
+    """A Poincaré section of one orbit (a job's or a member's ``poincare``): the crossings of ``surface = value``
+    in time order, every state and derived vector at each, and the section's own evidence."""
+
+    count: int = Field(description="number of crossings")
+    surface: str = Field(description="the surface's expression as requested")
+    value: float = Field(description="the level of the surface")
+    direction: Literal["increasing", "decreasing", "both"]
+    t: list[float] = Field(description="crossing times [s]")
+    tau: list[float] | None = Field(description="the reduced time at the crossings (null for systems without one)")
+    points: dict[str, list[list[float]]] = Field(
+        description="every state and derived vector by name (M, gamma, omega for the ball), one row per crossing")
+    coordinate_names: list[str] = Field(description="the two components reported as the section's coordinates")
+    coordinates: list[list[float]] = Field(description="those two components, one pair per crossing")
+    surface_residual_max: float = Field(description="max |S(x) - value| / surface_scale at the points")
+    surface_scale: float = Field(description="the surface's natural size (normalises the residual)")
+    integral_drift_max: dict[str, float] = Field(
+        description="per first integral, max |I(x) - I(x0)| / max(|I(x0)|, its natural scale) over the points")
+    stopped_early: bool = Field(description="max_points crossings were found before t_final")
+    warnings: list[str]
+    steps: int = Field(description="accepted Taylor steps")
+    wall_time_s: float
+    t_final: float = Field(description="the requested end time [s]")
+    tolerance: float = Field(description="the integrator's tolerance")
+
+
+class SectionExport(SectionResult):
+    """``GET /v1/jobs/{id}/section?format=json``: the job's section with the unit of every column."""
+
+    units: dict[str, str] = Field(description="unit of t, tau, every vector and parameter group")
+
+
+class ExpectedZeroItem(BaseModel):
+    """One structural reason for a vanishing Lyapunov exponent, counted or not."""
+
+    reason: str
+    formula: str
+    counted: bool = Field(description="whether it adds a zero exponent")
+    note: str = Field(description="why it counts or not")
+
+
+class SpectrumResult(BaseModel):
+    """A Lyapunov spectrum (a job's or a member's ``lyapunov``): exponents, running estimates and the checks
+    of their sum against the invariant measure."""
+
+    exponents: list[float] = Field(description="the count largest exponents, descending [1/s]")
+    all_exponents: list[float] = Field(description="the whole spectrum, descending [1/s]")
+    convergence_t: list[float] = Field(description="times of the kept QR steps after the transient [s]")
+    convergence: list[list[float]] = Field(description="running estimates, one row per convergence_t")
+    sum: float = Field(description="sum of the whole spectrum (= time average of div f, Liouville)")
+    sum_expected: float | None = Field(description="what the invariant measure predicts for T -> infinity (0)")
+    sum_reason: str
+    divergence_average: float | None = Field(description="(1/T) int div f dt by quadrature")
+    measure_average: float | None = Field(description="-[ln rho]/T: the claimed measure's prediction at this T")
+    measure_consistent: bool | None = Field(description="sum equals measure_average; false: the measure is "
+                                                        "contradicted")
+    expected_zero: list[ExpectedZeroItem]
+    zero_count: int = Field(description="how many exponents must vanish")
+    zero_indices: list[int] = Field(description="indices into all_exponents of the zero_count smallest in magnitude")
+    zero_observed: list[float]
+    moved_last_20pct: list[float] = Field(description="per exponent, max - min of its estimate over the last 20 %")
+    symmetry_residual: float | None = Field(description="max |lambda_i + lambda_(n+1-i)| for a reversible field")
+    method: str
+    interval: float
+    transient: float
+    t_final: float
+    tolerance: float
+    steps: int = Field(description="QR re-orthonormalisations after the transient")
+    integrator_steps: int
+    wall_time_s: float
+    warnings: list[str]
 
 
 def _plain(value: Any) -> Any:

@@ -81,7 +81,7 @@ class EnsembleRequest(BaseModel):
         "system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
         "members": {"sample": {"count": 64, "seed": 1, "level": {"energy": 1.0, "area": 0.0}}},
         "t_final": 500.0, "samples": 2,
-        "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "gamma2"]},
+        "poincare": {"surface": "gamma3", "coordinates": ["M1", "M2"]},
         "lyapunov": {"count": 1}}]})
 
     system: AnySystemSpec

@@ -65,7 +65,7 @@ class PaperReport(BaseModel):
     """The report: a row per claim and the count of each verdict."""
 
     paper: str
-    source: str
+    errata: str = Field(description="where the paper's misprints are documented, each with its test")
     complete: bool
     summary: dict[str, int]
     rows: list[ReportRow]

@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from nonholonomic.analysis.ensemble import MemberResult
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.simulation import SimulationResult
-from schemas.analysis import section_to_json, spectrum_to_json
+from schemas.analysis import SectionResult, SpectrumResult, section_to_json, spectrum_to_json
 
 
 class IntegralItem(BaseModel):
@@ -126,8 +126,9 @@ class SimulationResultModel(BaseModel):
     checks: list[CheckItem]
     integration: IntegrationInfo
     warnings: list[str]
-    poincare: dict[str, Any] | None = Field(None, description="the Poincare section, when asked for")
-    lyapunov: dict[str, Any] | None = Field(None, description="the Lyapunov spectrum, when asked for")
+    poincare: SectionResult | None = Field(None, description="the Poincare section, when asked for "
+                                                             "(GET /v1/jobs/{id}/section exports it)")
+    lyapunov: SpectrumResult | None = Field(None, description="the Lyapunov spectrum, when asked for")
     claims: list[ClaimItem] = Field(default_factory=list, description="the request's claims, each with its evidence")
 
 
@@ -231,8 +232,9 @@ class MemberResultModel(BaseModel):
     checks: list[CheckItem] | None = None
     integration: IntegrationInfo | None = None
     warnings: list[str] | None = None
-    poincare: dict[str, Any] | None = None
-    lyapunov: dict[str, Any] | None = None
+    poincare: SectionResult | None = None
+    lyapunov: SpectrumResult | None = Field(None, description="the spectrum, its convergence series thinned to "
+                                                              f"{MEMBER_CONVERGENCE_ROWS} rows")
 
 
 def first_non_finite(value: Any, path: str = "") -> tuple[str, float] | None:

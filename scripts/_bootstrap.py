@@ -56,5 +56,8 @@ def ensure_installed(extras: str = "") -> None:
         return
     say(f"installing {spec} into .venv (first run downloads heyoka, ~100 MB)")
     subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "--upgrade", "pip"], check=True)
-    subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "-e", spec], check=True, cwd=ROOT)
+    # setuptools says "Editable installation ... be careful with folders in your working directory"
+    # on every editable install (an information, shown as a warning): not for a newcomer's screen.
+    quiet = {**os.environ, "PYTHONWARNINGS": "ignore:Editable installation"}
+    subprocess.run([str(PYTHON), "-m", "pip", "install", "-q", "-e", spec], check=True, cwd=ROOT, env=quiet)
     stamp.write_text(digest)

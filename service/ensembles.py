@@ -15,6 +15,7 @@ import numpy as np
 from nonholonomic.analysis.ensemble import summarize
 from schemas.results import system_units
 from schemas.systems import definition_of
+from service.exports import section_columns
 from store.ensembles import EnsembleStore
 
 
@@ -59,8 +60,9 @@ def members_page(store: EnsembleStore, ensemble_id: str, record: dict[str, Any],
     return sorted(out, key=lambda m: m["index"])
 
 
-def _section_members(store: EnsembleStore, ensemble_id: str,
-                     record: dict[str, Any]) -> Iterator[tuple[int, dict[str, Any]]]:
+def section_members(store: EnsembleStore, ensemble_id: str,
+                    record: dict[str, Any]) -> Iterator[tuple[int, dict[str, Any]]]:
+    """(member index, its ``poincare`` block) of every member done that has one, in index order."""
     for i in sorted(record["done"]):
         for member in store.chunk_members(ensemble_id, i) or []:
             if member.get("poincare"):
@@ -72,24 +74,13 @@ def request_units(request: dict[str, Any]) -> dict[str, str]:
     return system_units(definition_of(request["system"]))
 
 
-def _columns(section: dict[str, Any], units: dict[str, str]) -> list[tuple[str, str, int | None]]:
-    """(column header ``name [unit]``, key in the section, component) for t, tau, every point vector's components."""
-    cols: list[tuple[str, str, int | None]] = [(f"t [{units['t']}]", "t", None)]
-    if section.get("tau") is not None:
-        cols.append((f"tau [{units.get('tau', '')}]", "tau", None))
-    for name, values in section["points"].items():
-        width = len(values[0]) if values else 3
-        cols += [(f"{name}{k + 1} [{units.get(name, '')}]", name, k) for k in range(width)]
-    return cols
-
-
 def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> Iterator[str]:
     """Every member's crossings as CSV, one row per crossing, the member index first, a header naming
     each column and its unit (streamed a member at a time)."""
     header_written = False
     units = request_units(record["request"])
-    for index, section in _section_members(store, ensemble_id, record):
-        cols = _columns(section, units)
+    for index, section in section_members(store, ensemble_id, record):
+        cols = section_columns(section, units)
         buffer = io.StringIO()
         writer = csv.writer(buffer)
         if not header_written:
@@ -107,7 +98,7 @@ def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
     """Every member's crossings as NPZ arrays (``member``, ``t``, ``tau``, each point vector ``(n, 3)``),
     with the request and the units as JSON in ``request_json`` and ``units_json``."""
     parts: dict[str, list[np.ndarray]] = {"member": []}
-    for index, section in _section_members(store, ensemble_id, record):
+    for index, section in section_members(store, ensemble_id, record):
         parts["member"].append(np.full(section["count"], index, dtype=np.int64))
         for key in ("t", "tau"):
             if section.get(key) is not None:
@@ -119,3 +110,13 @@ def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
     np.savez(buffer, **arrays, request_json=np.array(json.dumps(record["request"])),
              units_json=np.array(json.dumps(request_units(record["request"]))))
     return buffer.getvalue()
+
+
+def section_netcdf(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> bytes:
+    """Every member's crossings as NetCDF-4 (:func:`service.exports_netcdf.ensemble_section_netcdf`), the
+    ensemble's summary as the evidence."""
+    from service.exports_netcdf import ensemble_section_netcdf
+
+    summary = view(ensemble_id, record)["summary"]
+    members = sorted(section_members(store, ensemble_id, record), key=lambda item: item[0])
+    return ensemble_section_netcdf(ensemble_id, record, summary, members, request_units(record["request"]))

@@ -1,52 +1,103 @@
-"""A job's sampled trajectory as a file: CSV (one header row naming each column and its unit, t and
-τ first) streamed row by row, or NPZ (the arrays, with the request and the library versions as JSON)."""
+"""A job's sampled trajectory and Poincaré section as files: CSV (one header row naming each column and its
+unit, t and τ first) streamed row by row, NPZ (the arrays, with the request and the library versions as
+JSON) or NetCDF-4 (:mod:`service.exports_netcdf`), and how a download route answers and declares them.
+
+Every download may also be asked for as ``application/octet-stream`` (``Accept``); its OpenAPI ``200``
+lists that media type first (:func:`download_responses`) so that a generated client reads the bytes.
+"""
 
 from __future__ import annotations
 
 import csv
 import io
 import json
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from fastapi import Request, Response
+from fastapi.responses import JSONResponse, StreamingResponse
+
+from service.security import content_disposition
 
 #: CSV rows written per streamed piece.
 ROWS_PER_PIECE = 2000
+#: The media type of each file format (``?format=``).
+MEDIA_TYPES = {"csv": "text/csv", "npz": "application/octet-stream", "netcdf": "application/x-netcdf"}
+#: The file name suffix of each format.
+SUFFIXES = {"csv": "csv", "npz": "npz", "netcdf": "nc", "json": "json"}
+BINARY = "application/octet-stream"
+#: The schema of a body that is bytes (a generated client reads it as a file).
+_BYTES_SCHEMA = {"type": "string", "format": "binary"}
+
+Column = tuple[str, str, "int | None"]
 
 
-def _vectors(trajectory: dict[str, Any]) -> list[str]:
-    return [k for k in trajectory if k not in ("t", "tau")]
+def _vectors(samples: Mapping[str, Any]) -> list[str]:
+    return [k for k in samples if k not in ("t", "tau")]
 
 
-def trajectory_columns(result: dict[str, Any]) -> list[tuple[str, str, int | None]]:
-    """(header ``name [unit]``, trajectory key, component or None) for t, τ and every vector's components."""
-    units = result["system"]["units"]
-    trajectory = result["trajectory"]
-    cols: list[tuple[str, str, int | None]] = [(f"t [{units.get('t', 's')}]", "t", None)]
-    if trajectory.get("tau") is not None:
+def columns(times: Mapping[str, Any], vectors: Mapping[str, Any], units: Mapping[str, str]) -> list[Column]:
+    """(header ``name [unit]``, key, component or None) for t, τ (when ``times`` has one) and every
+    component of every vector (``M1``, ``M2`` ...: the vector's name and the component's number from 1)."""
+    cols: list[Column] = [(f"t [{units.get('t', 's')}]", "t", None)]
+    if times.get("tau") is not None:
         cols.append((f"tau [{units.get('tau', '')}]", "tau", None))
-    for name in _vectors(trajectory):
-        width = len(trajectory[name][0]) if trajectory[name] else 3
+    for name, values in vectors.items():
+        width = len(values[0]) if len(values) else 3
         cols += [(f"{name}{k + 1} [{units.get(name, '')}]", name, k) for k in range(width)]
     return cols
+
+
+def trajectory_columns(result: dict[str, Any]) -> list[Column]:
+    """(header ``name [unit]``, trajectory key, component or None) for t, τ and every vector's components."""
+    trajectory = result["trajectory"]
+    return columns(trajectory, {name: trajectory[name] for name in _vectors(trajectory)}, result["system"]["units"])
+
+
+def section_columns(section: dict[str, Any], units: Mapping[str, str]) -> list[Column]:
+    """The same for a section (``poincare`` block): t, τ, every point vector's components."""
+    return columns(section, section["points"], units)
+
+
+def _csv_rows(cols: Sequence[Column], times: Mapping[str, Any], vectors: Mapping[str, Any], count: int,
+              first: Sequence[Any] = ()) -> Iterator[list[Any]]:
+    for row in range(count):
+        yield [*first, *[repr(float(times[key][row] if k is None else vectors[key][row][k])) for _, key, k in cols]]
+
+
+def _streamed(header: Sequence[str], rows: Iterable[list[Any]]) -> Iterator[str]:
+    """CSV text a piece of :data:`ROWS_PER_PIECE` rows at a time (floats as ``repr``: they read back exactly)."""
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(header)
+    for n, row in enumerate(rows, 1):
+        writer.writerow(row)
+        if n % ROWS_PER_PIECE == 0:
+            yield buffer.getvalue()
+            buffer.seek(0)
+            buffer.truncate()
+    yield buffer.getvalue()
 
 
 def trajectory_csv(result: dict[str, Any]) -> Iterator[str]:
     """The samples as CSV, a piece of :data:`ROWS_PER_PIECE` rows at a time (floats in full precision)."""
     cols = trajectory_columns(result)
     trajectory = result["trajectory"]
-    buffer = io.StringIO()
-    writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow([c[0] for c in cols])
-    for row in range(len(trajectory["t"])):
-        writer.writerow([repr(float(trajectory[key][row] if k is None else trajectory[key][row][k]))
-                         for _, key, k in cols])
-        if (row + 1) % ROWS_PER_PIECE == 0:
-            yield buffer.getvalue()
-            buffer.seek(0)
-            buffer.truncate()
-    yield buffer.getvalue()
+    return _streamed([c[0] for c in cols], _csv_rows(cols, trajectory, trajectory, len(trajectory["t"])))
+
+
+def section_csv(section: dict[str, Any], units: Mapping[str, str]) -> Iterator[str]:
+    """A job's crossings as CSV: one row per crossing, t, τ and every state and derived component, a
+    header naming each column and its unit."""
+    cols = section_columns(section, units)
+    return _streamed([c[0] for c in cols], _csv_rows(cols, section, section["points"], len(section["t"])))
+
+
+def _npz(arrays: dict[str, np.ndarray], **texts: Any) -> bytes:
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays, **{f"{name}_json": np.array(json.dumps(value)) for name, value in texts.items()})
+    return buffer.getvalue()
 
 
 def trajectory_npz(result: dict[str, Any], request: dict[str, Any]) -> bytes:
@@ -57,8 +108,68 @@ def trajectory_npz(result: dict[str, Any], request: dict[str, Any]) -> bytes:
     if trajectory.get("tau") is not None:
         arrays["tau"] = np.asarray(trajectory["tau"], dtype=float)
     arrays.update({name: np.asarray(trajectory[name], dtype=float) for name in _vectors(trajectory)})
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays, units_json=np.array(json.dumps(result["system"]["units"])),
-             request_json=np.array(json.dumps(request)),
-             versions_json=np.array(json.dumps(result["integration"]["versions"])))
-    return buffer.getvalue()
+    return _npz(arrays, units=result["system"]["units"], request=request, versions=result["integration"]["versions"])
+
+
+def section_npz(result: dict[str, Any], request: dict[str, Any]) -> bytes:
+    """A job's crossings as NPZ: ``t``, ``tau`` (when the system has one), each point vector ``(count, k)``,
+    ``coordinates`` ``(count, 2)``; ``units_json``, ``request_json``, ``versions_json`` and ``section_json``
+    (surface, value, direction, coordinate names, residual, drifts, warnings)."""
+    section = result["poincare"]
+    count = len(section["t"])
+    arrays = {"t": np.asarray(section["t"], dtype=float)}
+    if section.get("tau") is not None:
+        arrays["tau"] = np.asarray(section["tau"], dtype=float)
+    arrays.update({name: np.asarray(values, dtype=float).reshape(count, -1) if count else np.zeros((0, 3))
+                   for name, values in section["points"].items()})
+    arrays["coordinates"] = np.asarray(section["coordinates"], dtype=float).reshape(count, 2)
+    return _npz(arrays, units=result["system"]["units"], request=request, versions=result["integration"]["versions"],
+                section=section_facts(section))
+
+
+def section_facts(section: Mapping[str, Any]) -> dict[str, Any]:
+    """A section's block without its arrays (what the files keep beside them)."""
+    return {k: v for k, v in section.items() if k not in ("t", "tau", "points", "coordinates")}
+
+
+# --------------------------------------------------------------------------------------------------
+# answering and declaring a download
+
+
+def wants_bytes(request: Request) -> bool:
+    """The request's ``Accept`` names ``application/octet-stream`` (and no other media type, nor ``*/*``)."""
+    accept = [part.split(";")[0].strip().lower() for part in request.headers.get("accept", "").split(",")]
+    accept = [a for a in accept if a]
+    return BINARY in accept and all(a == BINARY for a in accept)
+
+
+def download(request: Request, body: bytes | Iterator[str], media_type: str, filename: str,
+             disposition: str = "attachment") -> Response:
+    """The answer of a download: ``body`` (streamed when an iterator) as ``media_type``, or as
+    ``application/octet-stream`` when the request asks only for that (:func:`wants_bytes`)."""
+    headers = content_disposition(disposition, filename)
+    media = BINARY if wants_bytes(request) else media_type
+    if isinstance(body, bytes):
+        return Response(body, media_type=media, headers=headers)
+    return StreamingResponse(body, media_type=media, headers=headers)
+
+
+def json_download(request: Request, body: dict[str, Any], filename: str) -> Response:
+    """A download's JSON form: ``application/json`` (inline), or the same bytes as
+    ``application/octet-stream`` (an attachment) when the request asks only for that."""
+    answer = JSONResponse(body)
+    if wants_bytes(request):
+        return download(request, bytes(answer.body), "application/json", filename)
+    return answer
+
+
+def download_responses(media_types: Iterable[str], description: str) -> dict[int | str, dict[str, Any]]:
+    """The ``responses=`` entry of a download route's ``200``: ``application/octet-stream`` first, then every
+    other media type the route answers, each a binary string. A client generated from the document (e.g.
+    by openapi-python-client) reads the first media type it knows, so it gets the bytes whatever the format;
+    :func:`service.openapi.finalize` keeps ``application/octet-stream`` first where FastAPI put a route's
+    JSON model before it."""
+    content: dict[str, Any] = {BINARY: {"schema": dict(_BYTES_SCHEMA)}}
+    content.update({m: {"schema": dict(_BYTES_SCHEMA)} for m in media_types if m != BINARY})
+    return {200: {"description": description + "; application/octet-stream when the request's Accept asks only "
+                                               "for it", "content": content}}

@@ -7,9 +7,14 @@ from __future__ import annotations
 
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from functools import lru_cache
+from pathlib import Path
 
-from fastapi import Depends, FastAPI
+import fastapi_offline
+from fastapi import Depends, FastAPI, Request, Response
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.openapi.docs import get_redoc_html
+from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
 from fastapi_offline import FastAPIOffline
 
@@ -22,7 +27,16 @@ from service.errors import install_error_handlers, problem_responses
 from service.idempotency import idempotency_store
 from service.isolated import start_fork_server
 from service.limits import BodyLimit
-from service.routes import ensembles, health, jobs, maps, pages, report, symbolic, systems
+from service.routes import (
+    ensembles,
+    health,
+    jobs,
+    maps,
+    pages,
+    report,
+    symbolic,
+    systems,
+)
 from service.security import SecurityHeaders
 from workers.disk_memo import install_disk_memo
 
@@ -30,6 +44,13 @@ from workers.disk_memo import install_disk_memo
 STATIC_URL = "/static"
 #: Swagger UI and ReDoc (their own, looser content security policy: :data:`service.security.DOCS_POLICY`).
 DOCS_URL, REDOC_URL = "/docs", "/redoc"
+#: ReDoc's bundle as /redoc loads it: fastapi-offline's file with its one address on the internet (the
+#: "API docs by Redocly" logo, drawn whatever the options) replaced by an empty image.
+REDOC_JS_URL = "/docs-assets/redoc.standalone.js"
+REDOC_LOGO = "https://cdn.redoc.ly/redoc/logo-mini.svg"
+_EMPTY_IMAGE = "data:image/gif;base64,R0lGODlhAQABAIAAAAAAAP///yH5BAEAAAAALAAAAAABAAEAAAIBRAA7"
+#: Swagger UI asks validator.swagger.io for a badge when the service is not on localhost: not asked.
+SWAGGER_UI_PARAMETERS = {"validatorUrl": None}
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -49,9 +70,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             app.state.backend.close()
 
-    app = FastAPIOffline(  # /docs and /redoc from files in the package, no CDN
+    app = FastAPIOffline(  # /docs from files in the package, no CDN; /redoc: ours, below
         docs_url=DOCS_URL,
-        redoc_url=REDOC_URL,
+        redoc_url=None,
+        swagger_ui_parameters=SWAGGER_UI_PARAMETERS,
         title="nonholonomic",
         version=nonholonomic.__version__,
         summary="Nonholonomic mechanics with machine-checked evidence (Borisov & Mamaev, "
@@ -76,8 +98,33 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                    pages.router):
         app.include_router(router, **keyed)  # type: ignore[arg-type]
     app.mount(STATIC_URL, StaticFiles(packages=[("service", "static")]), name="static")
+    _redoc(app)
     _secure(app)
     return app
+
+
+@lru_cache(maxsize=1)
+def redoc_bundle() -> bytes:
+    """fastapi-offline's ReDoc bundle with the Redocly logo's address replaced by an empty ``data:`` image,
+    so that /redoc asks nothing from elsewhere (its fonts are the system's: no Google Fonts link)."""
+    text = (Path(fastapi_offline.__file__).parent / "static" / "redoc.standalone.js").read_text(encoding="utf-8")
+    return text.replace(REDOC_LOGO, _EMPTY_IMAGE).encode()
+
+
+def _redoc(app: FastAPI) -> None:
+    """``/redoc``: ReDoc with the patched bundle (:func:`redoc_bundle`), no Google Fonts."""
+
+    @app.get(REDOC_URL, include_in_schema=False)
+    async def redoc_html(request: Request) -> HTMLResponse:
+        root = request.scope.get("root_path", "")
+        return get_redoc_html(openapi_url=f"{root}{app.openapi_url}", title=f"{app.title} - ReDoc",
+                              redoc_js_url=f"{root}{REDOC_JS_URL}", redoc_favicon_url=f"{root}{STATIC_URL}/favicon.svg",
+                              with_google_fonts=False)
+
+    @app.get(REDOC_JS_URL, include_in_schema=False)
+    async def redoc_js() -> Response:
+        return Response(redoc_bundle(), media_type="text/javascript",
+                        headers={"Cache-Control": "public, max-age=86400"})
 
 
 def _secure(app: FastAPI) -> None:

@@ -11,7 +11,10 @@ parameters; this service answers every error as ``application/problem+json`` (:m
   moves to ``application/problem+json``;
 - ``Problem`` and ``FieldError`` are in the components, ``HTTPValidationError`` and
   ``ValidationError`` are not;
-- every operation with a request body declares the 413 of :class:`service.limits.BodyLimit`.
+- every operation with a request body declares the 413 of :class:`service.limits.BodyLimit`;
+- a success that may be bytes (a download, :func:`service.exports.download_responses`) lists
+  ``application/octet-stream`` first, before the JSON model FastAPI puts there: a client generated from
+  the document (openapi-python-client takes the first media type it knows) reads every format as bytes.
 
 :func:`state_limits` then writes this deployment's limits (:class:`schemas.settings.Settings`:
 ``max_t_final``, ``max_samples`` ...) into the request schemas as ``maximum`` / ``maxItems``, so that
@@ -37,6 +40,7 @@ from schemas.settings import Settings
 REF_PREFIX = "#/components/schemas/"
 _FASTAPI_VALIDATION = REF_PREFIX + "HTTPValidationError"
 _PROBLEM = REF_PREFIX + "Problem"
+_BINARY = "application/octet-stream"
 #: Keys of a path parameter's schema that let a value fail validation.
 _CONSTRAINTS = frozenset({"enum", "const", "pattern", "minLength", "maxLength", "format", "anyOf", "oneOf", "allOf",
                           "$ref", "minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"})
@@ -92,6 +96,9 @@ def finalize(document: dict[str, Any]) -> dict[str, Any]:
             responses = operation["responses"]
             for status, response in list(responses.items()):
                 content = response.get("content", {})
+                if str(status).startswith("2") and _BINARY in content and next(iter(content)) != _BINARY:
+                    response["content"] = content = {_BINARY: content[_BINARY],
+                                                     **{k: v for k, v in content.items() if k != _BINARY}}
                 schema = content.get("application/json", {}).get("schema", {})
                 if schema.get("$ref") == _FASTAPI_VALIDATION:
                     if _can_fail_validation(operation):

@@ -11,20 +11,50 @@ from typing import Any
 from jinja2 import Environment, PackageLoader, select_autoescape
 
 import nonholonomic
+from nonholonomic.analysis.lyapunov_result import CONVERGENCE_WARNING
 
 #: Seconds between reloads of a page whose job or ensemble is queued or running.
 REFRESH_S = 2
 #: Plots on a job's page: (name, caption); shown when the result has what they need.
 JOB_PLOT_CAPTIONS = {
-    "trajectory": "the orbit on its sphere or ellipsoid, and the momentum against t",
+    "trajectory": "the orbit on its sphere or ellipsoid, and the momentum against t (drawn from the integrator's "
+                  "dense output through the stored samples)",
     "integrals": "relative drift |I(t) − I(0)| / max(|I(0)|, scale) of every first integral at the samples",
     "poincare": "the Poincaré section: the two coordinates asked for at each crossing",
-    "lyapunov": "running estimates of the Lyapunov exponents (QR every interval)",
+    "lyapunov": "running finite-time estimates of the Lyapunov exponents (QR every interval); the title says "
+                "whether they have converged",
 }
 ENSEMBLE_PLOT_CAPTIONS = {
     "poincare": "every member's section points, one colour per member",
-    "exponents": "largest Lyapunov exponent of each member (against the swept parameter, or a histogram)",
+    "exponents": "largest Lyapunov exponent of each member, a finite-time estimate (against the swept parameter, "
+                 "or a histogram); the members not converged are drawn apart",
 }
+#: How to cite, on every page; the same data as ``CITATION.cff`` at the repository's root (a test compares them).
+CITATION = {
+    "software": {"title": "nonholonomic: a computation service for nonholonomic mechanics with machine-checked "
+                          "evidence",
+                 "authors": "The nonholonomic developers", "version": nonholonomic.__version__, "license": "MIT"},
+    "paper": {"title": "Hamiltonization of nonholonomic systems", "authors": ["A. V. Borisov", "I. S. Mamaev"]},
+}
+
+
+def citation_text() -> dict[str, str]:
+    """The software's and the paper's citation as text, and both as BibTeX."""
+    software, paper = CITATION["software"], CITATION["paper"]
+    authors = " and ".join(paper["authors"])
+    bib_authors = " and ".join("{}, {}".format(*reversed(a.rsplit(" ", 1))) for a in paper["authors"])
+    return {
+        "software": f"{software['authors']}, {software['title']}, version {software['version']} "
+                    f"({software['license']} license).",
+        "paper": f"{authors}, \u201c{paper['title']}\u201d.",
+        "bibtex": (f"@software{{nonholonomic,\n  author  = {{{{{software['authors']}}}}},\n"
+                   f"  title   = {{{software['title']}}},\n  version = {{{software['version']}}},\n"
+                   f"  license = {{{software['license']}}}\n}}\n"
+                   f"@misc{{borisov_mamaev_hamiltonization,\n  author = {{{bib_authors}}},\n"
+                   f"  title  = {{{paper['title']}}}\n}}"),
+    }
+
+
 #: The report's columns: (header, width in %).
 REPORT_COLUMNS = (("claim id", 12), ("claim", 27), ("equation", 8), ("verdict", 12), ("method", 8), ("residual", 7),
                   ("tolerance", 7), ("correction", 19))
@@ -60,6 +90,8 @@ def environment() -> Environment:
     env.filters["vec"] = _vec
     env.filters["verdict_class"] = lambda v: _VERDICT_CLASS.get(v, "")
     env.globals["version"] = nonholonomic.__version__
+    env.globals["citation"] = citation_text()
+    env.globals["convergence_warning"] = CONVERGENCE_WARNING
     return env
 
 
@@ -67,20 +99,28 @@ def _refresh(status: str) -> int | None:
     return REFRESH_S if status in ("queued", "running") else None
 
 
-def job_plots(result: dict[str, Any] | None) -> list[tuple[str, str]]:
-    """The plots a job's result can draw, with their captions."""
-    if not result or "trajectory" not in result:
+def job_plots(result: dict[str, Any] | None, status: str = "succeeded") -> list[tuple[str, str]]:
+    """The plots a job's result can draw, with their captions (none before it succeeded: the plot routes
+    answer 409 until then)."""
+    if status != "succeeded" or not result or "trajectory" not in result:
         return []
     return [(name, caption) for name, caption in JOB_PLOT_CAPTIONS.items()
             if name in ("trajectory", "integrals") or result.get(name)]
 
 
-def ensemble_plots(view: dict[str, Any]) -> list[tuple[str, str]]:
-    """The plots an ensemble can draw once members are done."""
-    if not view["members_done"]:
-        return []
+def ensemble_plots(view: dict[str, Any]) -> list[tuple[str, str, str | None]]:
+    """The plots an ensemble asked for: (name, caption, why it is not there yet or None). A plot is drawn
+    from the finished chunks' members; before one chunk finished with a member that succeeded, the page
+    shows the reason in its place, not an image that would answer 409."""
     wanted = {"poincare": bool(view["request"].get("poincare")), "exponents": bool(view["request"].get("lyapunov"))}
-    return [(name, caption) for name, caption in ENSEMBLE_PLOT_CAPTIONS.items() if wanted[name]]
+    if not view["chunks"]["done"]:
+        pending: str | None = ("no chunk of members is done" +
+                               (" (this page reloads every 2 s)" if view["status"] in ("queued", "running") else ""))
+    elif not (view.get("summary") or {}).get("succeeded"):
+        pending = "no member has succeeded" + (" yet" if view["status"] in ("queued", "running") else "")
+    else:
+        pending = None
+    return [(name, caption, pending) for name, caption in ENSEMBLE_PLOT_CAPTIONS.items() if wanted[name]]
 
 
 def render_job(job: dict[str, Any]) -> str:
@@ -90,7 +130,7 @@ def render_job(job: dict[str, Any]) -> str:
     """
     result = job.get("result")
     return environment().get_template("job.html").render(
-        job=job, result=result, system=(result or {}).get("system"), plots=job_plots(result),
+        job=job, result=result, system=(result or {}).get("system"), plots=job_plots(result, job["status"]),
         refresh=_refresh(job["status"]))
 
 

@@ -8,9 +8,14 @@ call :func:`job_plot` and :func:`ensemble_plot`.
 Figures are :class:`matplotlib.figure.Figure` objects with their own Agg canvas (no pyplot state).
 matplotlib's style (``rcParams``) and its text caches are process-global, so building and rendering
 run under one lock: plots are drawn one at a time, whatever thread serves the request. Lines are
-thinned to :data:`MAX_LINE_POINTS`, and data artists stay out of the constrained layout
-(``in_layout=False``: they are clipped to their axes, and measuring thousands of points per layout
-pass would cost more than drawing them).
+thinned to :data:`MAX_LINE_POINTS` (the trajectory to :data:`service.plot_orbit.MAX_POINTS`), and data
+artists stay out of the constrained layout (``in_layout=False``: they are clipped to their axes, and
+measuring thousands of points per layout pass would cost more than drawing them).
+
+The trajectory plot draws the orbit from the integrator's dense output (:mod:`service.plot_orbit`: the
+job's integration again on a fine grid through the stored samples), not the job's ``samples`` (201 by
+default, chords on a long orbit). The Lyapunov plots say that they show finite-time estimates, at which
+t, and which have not converged. The ensemble's figures are in :mod:`service.plot_ensemble`.
 
 Which vector is drawn on which surface comes from the system's definition, not a table: the
 *geometric vector* is the first state vector fixed by a constraint on itself alone (``|γ| = 1``,
@@ -134,9 +139,13 @@ def ensemble_plot(name: str, view: dict, members: Iterable[dict], fmt: str) -> b
     PlotUnavailable
         If no member has what the plot needs.
     """
+    from service.plot_ensemble import (
+        ENSEMBLE_FIGURES,  # the ensemble's figures, in their own module
+    )
+
     _check(name, ENSEMBLE_PLOTS, fmt)
     with _LOCK, matplotlib.rc_context(_STYLE):
-        fig = _ENSEMBLE_FIGURES[name](view, members)
+        fig = ENSEMBLE_FIGURES[name](view, members)
         return _render(fig, fmt)
 
 
@@ -328,16 +337,22 @@ def _space_orbit(ax3: Any, g: np.ndarray, keep: np.ndarray, t: np.ndarray, geome
 
 
 def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | None = None) -> Figure:
-    """The geometric vector on its sphere or ellipsoid (3-D) and the momentum-like vector against t."""
+    """The geometric vector on its sphere or ellipsoid (3-D) and the momentum-like vector against t, drawn
+    through the integrator's dense output (:func:`service.plot_orbit.dense_orbit`), not the job's samples."""
+    from service.plot_orbit import MAX_POINTS, dense_orbit, stored_orbit
+
     info = result["system"]
     units = info.get("units", {})
     system = _definition(info, request)
-    trajectory = result["trajectory"]
-    t = np.asarray(trajectory["t"], dtype=float)
     geometric, constraint = _geometric_vector(system)
     momentum = _momentum_vector(system, geometric)
-    g = _vector_samples(trajectory, geometric.name)
-    keep = _thin(len(t))
+    names = [geometric.name] + ([momentum.name] if momentum is not None else [])
+    _vector_samples(result["trajectory"], geometric.name)  # the samples are there, or the plot is unavailable
+    orbit = (dense_orbit(result, request, names) if request and "system" in request
+             else stored_orbit(result, names, "no request to integrate again"))
+    t = orbit.t
+    g = orbit.vectors[geometric.name]
+    keep = _thin(len(t), MAX_POINTS)
 
     fig = _new_figure(11.0, 4.8)
     if g.shape[1] == 2:  # generalized coordinates (q1, q2): the orbit in the plane
@@ -346,8 +361,8 @@ def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | N
         _space_orbit(fig.add_subplot(1, 2, 1, projection="3d"), g, keep, t, geometric, constraint, info, units)
 
     ax = fig.add_subplot(1, 2, 2)
-    if momentum is not None:
-        m = _vector_samples(trajectory, momentum.name)
+    if momentum is not None and momentum.name in orbit.vectors:
+        m = orbit.vectors[momentum.name]
         for k in range(m.shape[1]):
             ax.plot(t[keep], m[keep, k], linewidth=0.8, in_layout=False, label=_symbol(f"{momentum.name}{k + 1}"))
         ax.set_ylabel(_axis_label(momentum.name, units))
@@ -356,7 +371,8 @@ def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | N
     ax.set_xlabel(_axis_label("t", units))
     ax.grid(alpha=0.3)
     drawn = "" if len(keep) == len(t) else f", {len(keep)} of them drawn"
-    fig.suptitle(_headline(info, f"trajectory, t in [0, {t[-1]:g}] {units.get('t', 's')}, {len(t)} samples{drawn}"))
+    fig.suptitle(_headline(info, f"trajectory, t in [0, {t[-1]:g}] {units.get('t', 's')}: {orbit.note}{drawn}; "
+                                 f"largest chord sagitta {orbit.sagitta:.0e} × extent"))
     return fig
 
 
@@ -445,8 +461,23 @@ def _poincare_figure(result: Mapping[str, Any], request: Mapping[str, Any] | Non
     return fig
 
 
+def not_converged(spectrum: Mapping[str, Any]) -> bool:
+    """Whether a spectrum says its estimates have not converged (its ``warnings``: an estimate still moves
+    by more than 5 % of max |λ| over the last 20 % of the run)."""
+    return any(str(w).startswith("not converged") for w in spectrum.get("warnings") or ())
+
+
+def finite_time(spectrum: Mapping[str, Any], t_final: float | None = None) -> str:
+    """``t = 200 s`` (and the transient left out): the time the finite-time estimates belong to."""
+    end = spectrum.get("t_final", t_final)
+    transient = float(spectrum.get("transient") or 0.0)
+    text = f"t = {end:g} s" if end is not None else "the end of the run"
+    return text + (f" (averaged after a transient of {transient:g} s)" if transient > 0 else "")
+
+
 def _lyapunov_figure(result: Mapping[str, Any], request: Mapping[str, Any] | None = None) -> Figure:
-    """Running estimates of the Lyapunov exponents against t (log t)."""
+    """Running estimates of the Lyapunov exponents against t (log t); the title says they are finite-time
+    estimates, and whether they have converged."""
     spectrum = result.get("lyapunov")
     if not spectrum:
         raise PlotUnavailable("this job asked for no Lyapunov spectrum")
@@ -470,8 +501,14 @@ def _lyapunov_figure(result: Mapping[str, Any], request: Mapping[str, Any] | Non
     ax.set_ylabel("running estimate of λᵢ [1/s]")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    fig.suptitle(_headline(info, f"Lyapunov exponents (QR every {spectrum.get('interval', 0):g} s, transient "
-                                 f"{spectrum.get('transient', 0):g} s); sum {spectrum.get('sum', float('nan')):.2e} "
+    loose = not_converged(spectrum)
+    moved = spectrum.get("moved_last_20pct") or []
+    verdict = ("not converged: " + (f"an estimate still moves by {max(moved):.2g} 1/s over the last 20 % of the run"
+                                    if moved else "run longer")) if loose else \
+        "converged to within 5 % of max |λ| over the last 20 % of the run"
+    ax.set_title(verdict, color="C3" if loose else "0.3")
+    fig.suptitle(_headline(info, f"Lyapunov exponents, finite-time estimates at {finite_time(spectrum, result.get('t_final'))}"
+                                 f" (QR every {spectrum.get('interval', 0):g} s); sum {spectrum.get('sum', float('nan')):.2e} "
                                  f"1/s, expected {spectrum.get('sum_expected', 0):g}"))
     return fig
 
@@ -479,109 +516,4 @@ def _lyapunov_figure(result: Mapping[str, Any], request: Mapping[str, Any] | Non
 _JOB_FIGURES: dict[str, Callable[[Mapping[str, Any], Mapping[str, Any]], Figure]] = {
     "trajectory": _trajectory_figure, "integrals": _integrals_figure,
     "poincare": _poincare_figure, "lyapunov": _lyapunov_figure,
-}
-
-
-# --------------------------------------------------------------------------- ensemble plots
-
-
-def _ensemble_system(view: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
-    """A ``system`` block (kind, title, equation) and the units of an ensemble, from its request."""
-    from pydantic import TypeAdapter
-
-    from schemas.results import system_units
-    from schemas.systems import AnySystemSpec
-
-    try:
-        spec = TypeAdapter(AnySystemSpec).validate_python(view["request"]["system"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise PlotUnavailable(f"the ensemble's request does not rebuild a system: {exc}") from None
-    system = spec.definition()
-    return {"kind": system.kind, "title": system.title, "equation": system.equation}, system_units(system)
-
-
-def _ensemble_poincare_figure(view: Mapping[str, Any], members: Iterable[Mapping[str, Any]]) -> Figure:
-    """Every member's section points, one colour per member (a colormap over the member index)."""
-    info, units = _ensemble_system(view)
-    chunks, indices, names, section = [], [], None, None
-    for member in members:
-        block = member.get("poincare")
-        if not block:
-            continue
-        section, names = block, names or block.get("coordinate_names")
-        points = np.asarray(block.get("coordinates") or [], dtype=float).reshape(-1, 2)
-        chunks.append(points)
-        indices.append(np.full(len(points), member.get("index", len(indices)), dtype=float))
-    if section is None:
-        raise PlotUnavailable("no member has a poincare section (the ensemble asked for none, or none succeeded)")
-    points = np.concatenate(chunks)
-    index = np.concatenate(indices)
-    keep = _thin(len(points), MAX_SECTION_POINTS)
-
-    fig = _new_figure(7.5, 6.0)
-    ax = fig.add_subplot(1, 1, 1)
-    size = 4.0 if len(keep) < 5_000 else 1.0 if len(keep) < 50_000 else 0.3  # tiny markers for many points
-    low, high = (float(index.min()), float(index.max())) if len(index) else (0.0, 1.0)
-    drawn = ax.scatter(points[keep, 0], points[keep, 1], c=index[keep], cmap="viridis", s=size, linewidths=0,
-                       rasterized=True, in_layout=False, vmin=low, vmax=max(high, low + 1))
-    bar = fig.colorbar(drawn, ax=ax, label="member index")
-    bar.locator = MaxNLocator(integer=True)
-    bar.update_ticks()
-    names = names or ["", ""]
-    ax.set_xlabel(_axis_label(names[0], units))
-    ax.set_ylabel(_axis_label(names[1], units))
-    ax.grid(alpha=0.3)
-    thinned = "" if len(keep) == len(points) else f" ({len(keep)} drawn)"
-    fig.suptitle(_headline(info, f"Poincaré section {section['surface']} = {section['value']:g}, "
-                                 f"{section['direction']} crossings: {len(points)} points{thinned} "
-                                 f"of {len(chunks)} members"))
-    return fig
-
-
-def _ensemble_exponents_figure(view: Mapping[str, Any], members: Iterable[Mapping[str, Any]]) -> Figure:
-    """The largest exponent against the swept parameter (a sweep), else the histogram of the largest exponents."""
-    info, units = _ensemble_system(view)
-    sweep = ((view.get("request") or {}).get("members") or {}).get("sweep")
-    largest, swept = [], []
-    for member in members:
-        spectrum = member.get("lyapunov")
-        if not spectrum or not spectrum.get("exponents"):
-            continue
-        largest.append(float(spectrum["exponents"][0]))
-        if sweep:
-            label = member.get("label") or {}
-            swept.append(float(label["value"]) if "value" in label else float(sweep["values"][member["index"]]))
-    if not largest:
-        raise PlotUnavailable("no member has a Lyapunov spectrum (the ensemble asked for none, or none succeeded)")
-    y = np.asarray(largest)
-
-    fig = _new_figure(8.0, 5.0)
-    ax = fig.add_subplot(1, 1, 1)
-    if sweep:
-        x = np.asarray(swept)
-        order = np.argsort(x, kind="stable")
-        ax.plot(x[order], y[order], marker="o", markersize=3, linewidth=0.8)
-        ax.axhline(0.0, color="0.5", linewidth=0.6)
-        path = sweep["parameter"]
-        match = _SWEEP_PATH.match(path.strip())
-        unit = units.get(match.group(1)) if match else None
-        ax.set_xlabel(f"{path} [{unit}]" if unit is not None else path)
-        ax.set_ylabel("largest Lyapunov exponent λ₁ [1/s]")
-        what = f"largest Lyapunov exponent against {path} ({len(y)} members)"
-    else:
-        bins = int(np.clip(np.sqrt(len(y)) * 2, 5, 60))
-        ax.hist(y, bins=bins, color="C0", alpha=0.85)
-        median = float(np.median(y))
-        ax.axvline(median, color="k", linestyle="--", linewidth=1.0, label=f"median {median:.4g} 1/s")
-        ax.set_xlabel("largest Lyapunov exponent λ₁ [1/s]")
-        ax.set_ylabel("members")
-        ax.legend(loc="upper right")
-        what = f"largest Lyapunov exponents of {len(y)} members"
-    ax.grid(alpha=0.3)
-    fig.suptitle(_headline(info, what))
-    return fig
-
-
-_ENSEMBLE_FIGURES: dict[str, Callable[[Mapping[str, Any], Iterable[Mapping[str, Any]]], Figure]] = {
-    "poincare": _ensemble_poincare_figure, "exponents": _ensemble_exponents_figure,
 }

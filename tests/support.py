@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import httpx
@@ -84,6 +85,23 @@ def start_api(port: int, log: Path, env: Mapping[str, str]) -> subprocess.Popen:
     """The API under uvicorn on 127.0.0.1:``port``; ``env`` decides the mode (``REDIS_URL`` or not)."""
     cmd = [str(BIN / "uvicorn"), "service.main:app", "--host", "127.0.0.1", "--port", str(port)]
     return subprocess.Popen(cmd, cwd=ROOT, env=_env(env), stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+@contextlib.contextmanager
+def embedded_api(logs: Path, env: Mapping[str, str] | None = None) -> Iterator[str]:
+    """The API under uvicorn in embedded mode (no Redis, no warm-up) on a free port; yields its base URL,
+    prints the end of its log if the block fails, stops it afterwards."""
+    port = free_port()
+    api = start_api(port, logs / "api.log", {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false", **(env or {})})
+    url = f"http://127.0.0.1:{port}"
+    try:
+        wait_healthy(url, timeout=120)
+        yield url
+    except Exception:
+        print((logs / "api.log").read_text()[-4000:])
+        raise
+    finally:
+        stop(api)
 
 
 def wait_until(predicate, timeout: float, what: str, interval: float = 0.1) -> None:

@@ -56,7 +56,8 @@ def paper_report(progress: Callable[[float], bool] | None = None,
             break
     counts = {v: sum(1 for r in rows if r["verdict"] == v) for v in VERDICTS}
     return {
-        "paper": PAPER, "source": "../shared/paper/hamiltonization.tex", "complete": complete,
+        "paper": PAPER, "complete": complete,
+        "errata": "docs/errata.md: each misprint (ERRATA n), its printed and corrected forms and its test",
         "summary": counts, "rows": rows, "seconds": round(time.perf_counter() - start, 2),
         "verdicts": {
             "holds": "the form the core uses passes; no printed variant differs, or it passes too",

@@ -145,7 +145,7 @@ def quadric_K() -> Row:
     return Row(claim, checks, note="the c_i / x_i^2 terms of the extended potential are not implemented")
 
 
-#: The quadric, level and states of the separatrix probe of bench/science.py (bench/SCIENCE.md, study 1):
+#: The quadric, level and states of the separatrix probe of bench/science.py (docs/science.md, study 1):
 #: B = (1, 2, 3), (H, K) = (0.5, 2), section x2 = 0; the states lie on the symmetric line omega2 = 0,
 #: 1e-4 on either side of the separatrix theta* = -0.3359 found by bisection there, and 1e-2 beside it.
 CHAOS_PARAMETERS = {"D0": 0.036, "m": 1.0, "R": 0.3, "B": [1.0, 2.0, 3.0]}
@@ -190,7 +190,7 @@ def jacobi_chaos() -> Row:
                             f"{regular[0]:.3g}), linear shear on an invariant torus"))
     return Row(claim, checks,
                note="chaotic in a thin layer at the separatrix (half-width 3e-4 .. 1e-3 in theta); 64 random states on "
-                    "the same level all look regular (bench/SCIENCE.md, study 1)")
+                    "the same level all look regular (docs/science.md, study 1)")
 
 
 @claim_id("kirchhoff.neumann")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response
-from fastapi.responses import JSONResponse, StreamingResponse
+from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView, MembersPage
@@ -13,17 +13,16 @@ from schemas.problems import CONFLICT
 from service.access import ensemble_of
 from service.admission import admit_ensemble
 from service.backends import JobBackend
-from service.ensembles import members_page, section_csv, section_npz, view
+from service.ensembles import members_page, section_csv, section_netcdf, section_npz, view
 from service.errors import (
     INVALID,
     UNAVAILABLE_BACKEND,
     ProblemError,
-    media_responses,
     problem_responses,
 )
+from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
-from service.security import content_disposition
 from service.validation import POOL_FULL, validated
 
 #: Operation ids are explicit, ``ensembles-<verb>``; a route without one gets ``ensembles-<its name>``.
@@ -83,22 +82,26 @@ def get_members(ensemble_id: str, request: Request, offset: int = Query(0, ge=0)
 
 
 @router.get("/{ensemble_id}/poincare", operation_id="ensembles-section", response_class=Response,
-            responses={**media_responses(("text/csv", "application/octet-stream"),
-                                         "every member's crossings: CSV (format=csv) or NPZ (format=npz)"),
+            responses={**download_responses(MEDIA_TYPES.values(), "every member's crossings: CSV (format=csv), NPZ "
+                                                                  "(format=npz) or NetCDF-4 (format=netcdf)"),
                        **_ERRORS, **problem_responses({409: "the ensemble asked for no section",
                                                        422: "unknown format"})},
-            summary="Every member's Poincare crossings, with the member index (CSV or NPZ)")
+            summary="Every member's Poincare crossings, with the member index (CSV, NPZ or NetCDF)")
 def get_section(ensemble_id: str, request: Request,
-                format: Literal["csv", "npz"] = Query("csv")) -> Response:  # noqa: A002
+                format: Literal["csv", "npz", "netcdf"] = Query(  # noqa: A002
+                    "csv", description="csv (member, then t, tau and every component, a header with units), npz "
+                                       "or netcdf (dimension crossing; coordinates member, t, tau)")) -> Response:
+    """The members done so far, in index order, each member's crossings in time order."""
     record = _record(request, ensemble_id)
     if not record["request"].get("poincare"):
         raise ProblemError(409, "No section", "this ensemble did not ask for a poincare section", CONFLICT)
     store = _backend(request).ensembles
-    filename = f"ensemble-{ensemble_id}-poincare.{format}"
-    headers = content_disposition("attachment", filename)  # the id as a safe name
+    filename = f"ensemble-{ensemble_id}-poincare.{SUFFIXES[format]}"  # the id as a safe name
     if format == "csv":
-        return StreamingResponse(section_csv(store, ensemble_id, record), media_type="text/csv", headers=headers)
-    return Response(section_npz(store, ensemble_id, record), media_type="application/octet-stream", headers=headers)
+        return download(request, section_csv(store, ensemble_id, record), MEDIA_TYPES[format], filename)
+    if format == "npz":
+        return download(request, section_npz(store, ensemble_id, record), MEDIA_TYPES[format], filename)
+    return download(request, section_netcdf(store, ensemble_id, record), MEDIA_TYPES[format], filename)
 
 
 @router.delete("/{ensemble_id}", status_code=202, operation_id="ensembles-cancel", response_model=EnsembleView,

@@ -5,9 +5,10 @@ from __future__ import annotations
 from typing import Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response
-from fastapi.responses import JSONResponse, StreamingResponse
+from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
+from schemas.analysis import SectionExport
 from schemas.job_list import DEFAULT_LIMIT, MAX_LIMIT, STATUSES, JobList, JobListItem, job_kind
 from schemas.jobs import JobAccepted, JobRequest, JobView
 from schemas.problems import CONFLICT, NOT_FOUND, FieldError
@@ -21,13 +22,21 @@ from service.errors import (
     UNAVAILABLE_BACKEND,
     ProblemError,
     invalid_request,
-    media_responses,
     problem_responses,
 )
-from service.exports import trajectory_csv, trajectory_npz
+from service.exports import (
+    MEDIA_TYPES,
+    SUFFIXES,
+    download,
+    download_responses,
+    json_download,
+    section_csv,
+    section_npz,
+    trajectory_csv,
+    trajectory_npz,
+)
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
-from service.security import content_disposition
 from service.validation import POOL_FULL, validated
 
 #: Operation ids are explicit, ``jobs-<verb>``; a route without one gets ``jobs-<its name>``.
@@ -79,28 +88,83 @@ def get_job(job_id: str, request: Request,
     return JSONResponse(_view(job_of(request, job_id), trajectory))
 
 
+#: The formats of a download (``?format=``): JSON, or a file (:data:`service.exports.MEDIA_TYPES`).
+ExportFormat = Literal["json", "csv", "npz", "netcdf"]
+_FORMAT = Query("json", description="json (the default), csv (a header row naming each column and its unit), "
+                                    "npz (numpy arrays, the request and versions as JSON) or netcdf (NetCDF-4, "
+                                    "CF-1.10 names, units and provenance attributes)")
+#: The files' media types (the JSON's, with its model, is FastAPI's ``response_model``).
+_FILE_TYPES = tuple(MEDIA_TYPES.values())
+
+
+def _succeeded(request: Request, job_id: str, what: str) -> JobRecord:
+    record = job_of(request, job_id)
+    if record.status != "succeeded" or record.result is None:
+        raise ProblemError(409, f"No {what} yet", f"job {job_id} is {record.status}; its {what} is there once "
+                                                  "it succeeded", CONFLICT)
+    if "trajectory" not in record.result:
+        raise ProblemError(409, f"No {what}", f"job {job_id} is a paper report, not a simulation", CONFLICT)
+    return record
+
+
 @router.get("/{job_id}/trajectory", operation_id="jobs-trajectory", response_model=TrajectoryExport,
-            responses={**media_responses(("text/csv", "application/octet-stream"),
-                                         "the samples: JSON (format=json), CSV (format=csv) or NPZ (format=npz)"),
+            responses={**download_responses(_FILE_TYPES, "the samples: JSON (format=json, TrajectoryExport), CSV "
+                                                         "(format=csv), NPZ (format=npz) or NetCDF-4 (format=netcdf)"),
                        **problem_responses({404: "unknown job id", 409: "the job has not succeeded (yet), or is a "
                                                                         "paper report",
                                             422: "unknown format", 503: UNAVAILABLE_BACKEND})},
-            summary="The sampled trajectory as JSON, CSV (a header with units; t and tau first) or NPZ")
-def get_trajectory(job_id: str, request: Request,
-                   format: Literal["json", "csv", "npz"] = Query("json")) -> Response:  # noqa: A002
-    record = job_of(request, job_id)
-    if record.status != "succeeded" or record.result is None:
-        raise ProblemError(409, "No trajectory yet", f"job {job_id} is {record.status}; its trajectory is there once "
-                                                     "it succeeded", CONFLICT)
-    if "trajectory" not in record.result:
-        raise ProblemError(409, "No trajectory", f"job {job_id} is a paper report, not a simulation", CONFLICT)
-    headers = content_disposition("attachment", f"job-{job_id}-trajectory.{format}")  # the id as a safe name
+            summary="The sampled trajectory as JSON, CSV (a header with units; t and tau first), NPZ or NetCDF")
+def get_trajectory(job_id: str, request: Request, format: ExportFormat = _FORMAT) -> Response:  # noqa: A002
+    """CSV columns: ``t [s]``, ``tau [unit]`` (systems with a reduced time), then every component of every
+    state and derived vector, ``M1 [kg m^2/s]`` ... NetCDF: dimension ``t``, coordinates ``t`` and ``tau``,
+    one variable per component named as the CSV's columns (``M1`` ...) with ``units`` and ``long_name``."""
+    record = _succeeded(request, job_id, "trajectory")
+    result = record.result
+    assert result is not None
+    filename = f"job-{job_id}-trajectory.{SUFFIXES[format]}"  # the id as a safe name
     if format == "csv":
-        return StreamingResponse(trajectory_csv(record.result), media_type="text/csv", headers=headers)
+        return download(request, trajectory_csv(result), MEDIA_TYPES[format], filename)
     if format == "npz":
-        return Response(trajectory_npz(record.result, record.request), media_type="application/octet-stream",
-                        headers=headers)
-    return JSONResponse({"units": record.result["system"]["units"], **record.result["trajectory"]})
+        return download(request, trajectory_npz(result, record.request), MEDIA_TYPES[format], filename)
+    if format == "netcdf":
+        from service.exports_netcdf import trajectory_netcdf
+
+        body = trajectory_netcdf(job_id, record.created_at, result, record.request)
+        return download(request, body, MEDIA_TYPES[format], filename)
+    return json_download(request, {"units": result["system"]["units"], **result["trajectory"]}, filename)
+
+
+@router.get("/{job_id}/section", operation_id="jobs-section", response_model=SectionExport,
+            responses={**download_responses(_FILE_TYPES, "the crossings: JSON (format=json, SectionExport), CSV "
+                                                         "(format=csv), NPZ (format=npz) or NetCDF-4 (format=netcdf)"),
+                       **problem_responses({404: "unknown job id", 409: "the job has not succeeded (yet), is a paper "
+                                                                        "report or asked for no poincare section",
+                                            422: "unknown format", 503: UNAVAILABLE_BACKEND})},
+            summary="The job's Poincare crossings as JSON, CSV (one row per crossing: t, tau, every state "
+                    "component), NPZ or NetCDF")
+def get_section(job_id: str, request: Request, format: ExportFormat = _FORMAT) -> Response:  # noqa: A002
+    """The section a job asked for (``poincare`` in the request), one row per crossing in time order. CSV
+    columns as the trajectory's: ``t [s]``, ``tau [unit]``, then every component of every state and derived
+    vector at the crossing (``M1 [kg m^2/s]`` ... ``gamma3 [1]`` ... ``omega3 [rad/s]``). NPZ: ``t``, ``tau``,
+    each vector ``(count, 3)``, ``coordinates`` ``(count, 2)``, ``units_json``, ``request_json``,
+    ``versions_json``, ``section_json``. NetCDF: dimension ``crossing``, coordinates ``t`` and ``tau``."""
+    record = _succeeded(request, job_id, "section")
+    result = record.result
+    assert result is not None
+    if not result.get("poincare"):
+        raise ProblemError(409, "No section", f"job {job_id} asked for no poincare section", CONFLICT)
+    filename = f"job-{job_id}-section.{SUFFIXES[format]}"
+    units = result["system"]["units"]
+    if format == "csv":
+        return download(request, section_csv(result["poincare"], units), MEDIA_TYPES[format], filename)
+    if format == "npz":
+        return download(request, section_npz(result, record.request), MEDIA_TYPES[format], filename)
+    if format == "netcdf":
+        from service.exports_netcdf import section_netcdf
+
+        body = section_netcdf(job_id, record.created_at, result, record.request)
+        return download(request, body, MEDIA_TYPES[format], filename)
+    return json_download(request, {"units": units, **result["poincare"]}, filename)
 
 
 @router.delete("/{job_id}", status_code=202, operation_id="jobs-cancel", response_model=JobView,

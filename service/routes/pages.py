@@ -1,5 +1,5 @@
 """Pages and plots: ``/v1/jobs/{id}/page``, ``/v1/jobs/{id}/plots/{name}.{format}`` and the same for
-ensembles. Plots of finished jobs and ensembles are cached (they cannot change)."""
+ensembles. Plots of finished jobs, and of an ensemble's finished chunks, are cached (they cannot change)."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from service.access import ensemble_of, job_of
 from service.backends import JobBackend, JobRecord
 from service.ensembles import members_page, request_units, view
 from service.errors import ProblemError, media_responses, problem_responses
+from service.exports import download, download_responses
 from service.pages import render_ensemble, render_job, render_report, render_report_status
 from service.security import content_disposition
 
@@ -29,7 +30,7 @@ JobPlotName = Literal["trajectory", "integrals", "poincare", "lyapunov"]
 EnsemblePlotName = Literal["poincare", "exponents"]
 PlotFormat = Literal["png", "svg"]
 _HTML = media_responses(["text/html"], "the page")
-_IMAGE = media_responses(["image/png", "image/svg+xml"], "the plot (PNG or SVG, as the path's suffix says)")
+_IMAGE = download_responses(["image/png", "image/svg+xml"], "the plot (PNG or SVG, as the path's suffix says)")
 
 
 class _PlotCache:
@@ -71,7 +72,10 @@ def _ensemble(request: Request, ensemble_id: str) -> dict[str, Any]:
 IMAGE_TYPES = {"png": "image/png", "svg": "image/svg+xml"}
 
 
-def _image(data: bytes, fmt: str, filename: str) -> Response:
+def _image(data: bytes, fmt: str, filename: str, request: Request | None = None) -> Response:
+    """The plot as its image type (``application/octet-stream`` when the request's Accept asks only for that)."""
+    if request is not None:
+        return download(request, data, IMAGE_TYPES[fmt], filename, "inline")
     return Response(data, media_type=IMAGE_TYPES[fmt], headers=content_disposition("inline", filename))
 
 
@@ -116,7 +120,7 @@ def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Req
                           keep=True)
     except PlotUnavailable as exc:
         raise ProblemError(409, "Plot unavailable", str(exc), CONFLICT) from None
-    return _image(data, fmt, f"job-{job_id}-{name}.{fmt}")
+    return _image(data, fmt, f"job-{job_id}-{name}.{fmt}", request)
 
 
 @router.get("/v1/ensembles/{ensemble_id}/page", tags=["ensembles"], operation_id="ensembles-page",
@@ -142,19 +146,19 @@ def _all_members(request: Request, ensemble_id: str, record: dict[str, Any]) -> 
                                                       422: "unknown plot name or format"})},
             summary="A plot of an ensemble (matplotlib): every member's poincare points, or the exponents")
 def ensemble_plot_route(ensemble_id: str, name: EnsemblePlotName, fmt: PlotFormat, request: Request) -> Response:
-    """Drawn from the members done so far; cached once the ensemble finished."""
+    """Drawn from the members of the chunks done so far; cached by that set of chunks."""
     record = _ensemble(request, ensemble_id)
     current = view(ensemble_id, record)
     if not record["done"]:
         raise ProblemError(409, "No members yet", f"ensemble {ensemble_id} is {current['status']} and no chunk has "
                                                   "finished yet", CONFLICT)
-    finished = current["status"] in ("succeeded", "failed", "cancelled")
     from service.plots import PlotUnavailable, ensemble_plot  # matplotlib: imported when the first plot is drawn
 
+    done = ",".join(str(i) for i in sorted(record["done"]))  # finished chunks do not change: neither does the plot
     try:
-        data = _cache.get(("ensemble", ensemble_id, name, fmt, str(len(record["done"]))),
+        data = _cache.get(("ensemble", ensemble_id, name, fmt, done),
                           lambda: ensemble_plot(name, current, _all_members(request, ensemble_id, record), fmt),
-                          keep=finished)
+                          keep=True)
     except PlotUnavailable as exc:
         raise ProblemError(409, "Plot unavailable", str(exc), CONFLICT) from None
-    return _image(data, fmt, f"ensemble-{ensemble_id}-{name}.{fmt}")
+    return _image(data, fmt, f"ensemble-{ensemble_id}-{name}.{fmt}", request)

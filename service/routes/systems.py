@@ -8,7 +8,8 @@ from fastapi import APIRouter
 
 from nonholonomic.catalog import catalog, describe
 from nonholonomic.systems import SYSTEMS
-from schemas.catalog import Catalog, SystemDescription
+from nonholonomic.systems.generalized_chaplygin import KIND as GENERALIZED_CHAPLYGIN
+from schemas.catalog import Catalog, CatalogGeneralizedChaplygin, SystemDescription
 from schemas.problems import NOT_FOUND
 from service.errors import ProblemError, did_you_mean, problem_responses
 from service.openapi import operation_id
@@ -22,11 +23,16 @@ def list_systems() -> dict[str, Any]:
     return catalog()
 
 
-@router.get("/{kind}", operation_id="systems-get", response_model=SystemDescription, response_model_exclude_unset=True,
-            responses=problem_responses({404: "unknown system kind"}), summary="One kind of the catalog")
+@router.get("/{kind}", operation_id="systems-get", response_model=SystemDescription | CatalogGeneralizedChaplygin,
+            response_model_exclude_unset=True, responses=problem_responses({404: "unknown system kind"}),
+            summary="One kind of the catalog (generalized_chaplygin: how to pose a system of one's own)")
 def get_system(kind: str) -> dict[str, Any]:
-    if kind not in SYSTEMS:
-        raise ProblemError(404, "Unknown system kind",
-                           f"no system kind {kind!r}{did_you_mean(kind, list(SYSTEMS))}; known: {sorted(SYSTEMS)}",
-                           NOT_FOUND)
-    return describe(kind)
+    """A kind of :data:`SYSTEMS` as a ``SystemDescription``; ``generalized_chaplygin`` (a system the request
+    writes itself) as the catalog's ``generalized_chaplygin`` entry, a ``CatalogGeneralizedChaplygin``."""
+    if kind in SYSTEMS:
+        return describe(kind)
+    if kind == GENERALIZED_CHAPLYGIN:
+        return catalog()["generalized_chaplygin"]
+    known = [*SYSTEMS, GENERALIZED_CHAPLYGIN]
+    raise ProblemError(404, "Unknown system kind",
+                       f"no system kind {kind!r}{did_you_mean(kind, known)}; known: {sorted(known)}", NOT_FOUND)

@@ -72,6 +72,16 @@ def test_unknown_kind_in_catalog_is_404(client):
     assert r.status_code == 404 and "did you mean 'chaplygin_ball'?" in r.json()["detail"]
 
 
+def test_the_generalized_chaplygin_entry_is_served_as_a_kind(client):
+    """``GET /v1/systems/generalized_chaplygin``: the catalog's entry for a system of one's own (its own shape)."""
+    r = client.get("/v1/systems/generalized_chaplygin")
+    assert r.status_code == 200, r.text
+    assert r.json() == client.get("/v1/systems").json()["generalized_chaplygin"]
+    assert r.json()["example"]["system"]["kind"] == "generalized_chaplygin" and "lagrangian" in r.json()["fields"]
+    r = client.get("/v1/systems/generalized_chaplygn")
+    assert r.status_code == 404 and "did you mean 'generalized_chaplygin'?" in r.json()["detail"]
+
+
 def test_a_misspelled_kind_gets_a_did_you_mean(client):
     r = client.post("/v1/jobs", json={"system": {"kind": "veselva"}, "t_final": 1.0})
     assert r.status_code == 422

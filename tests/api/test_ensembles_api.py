@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import time
 
 import numpy as np
@@ -70,6 +71,24 @@ def test_sampled_ensemble_on_one_level_with_section_and_exponents(client):
                                         params={"format": "npz"}).content))
     assert npz["member"].shape == (len(rows) - 1,) and npz["gamma"].shape == (len(rows) - 1, 3)
     assert np.array_equal(npz["t"], [float(row[1]) for row in rows[1:]])
+    # NetCDF-4: dimension crossing, coordinates member, t, tau; the members' numbers bit for bit
+    import xarray as xr
+
+    r = client.get(f"/v1/ensembles/{accepted['id']}/poincare", params={"format": "netcdf"})
+    assert r.status_code == 200 and r.headers["content-type"] == "application/x-netcdf"
+    assert r.headers["content-disposition"].endswith('-poincare.nc"')
+    ds = xr.open_dataset(r.content, engine="netcdf4").load()
+    assert dict(ds.sizes) == {"crossing": len(rows) - 1} and set(ds.coords) == {"member", "t", "tau"}
+    assert np.array_equal(ds["member"].values, npz["member"]) and ds["member"].dtype == np.int64
+    assert np.array_equal(ds["t"].values, npz["t"]) and np.array_equal(ds["tau"].values, npz["tau"])
+    for m in members:
+        mine = ds.where(ds["member"] == m["index"], drop=True)
+        assert np.array_equal(mine["gamma2"].values, np.asarray(m["poincare"]["points"]["gamma"])[:, 1])
+        assert np.array_equal(mine["omega3"].values, np.asarray(m["poincare"]["points"]["omega"])[:, 2])
+    assert ds["M1"].attrs["units"] == "kg m^2/s" and ds["t"].attrs["units"] == "s"
+    assert ds.attrs["Conventions"] == "CF-1.10" and ds.attrs["ensemble_id"] == accepted["id"]
+    assert json.loads(ds.attrs["request"])["members"]["sample"] == SAMPLED["members"]["sample"]
+    assert json.loads(ds.attrs["evidence"])["summary"]["succeeded"] == 6
 
 
 def test_same_request_and_seed_give_the_same_numbers_bit_for_bit(client):

@@ -27,12 +27,10 @@ from service.openapi import OPERATION_ID, SETTING_LIMITS, operation_id
 PROBLEM_REF = "#/components/schemas/Problem"
 #: Package name of the generated client (a directory on sys.path for this module only).
 CLIENT_PACKAGE = "nonholonomic_generated_client"
-#: No formatter hooks (no ruff needed); image media types read as bytes (the generator knows no image/*).
+#: No formatter hooks (no ruff needed); nothing else: the generator's defaults (no content_type_overrides),
+#: the client as anyone would generate it.
 GENERATOR_CONFIG = """\
 post_hooks: []
-content_type_overrides:
-  image/png: application/octet-stream
-  image/svg+xml: application/octet-stream
 """
 BALL_KINDS = ("chaplygin_ball", "chaplygin_ball_veselova", "rubber_ball")
 
@@ -66,6 +64,9 @@ def test_operation_ids_are_unique_and_stable(spec):
     assert ids["GET /v1/jobs/{job_id}"] == "jobs-get"
     assert ids["DELETE /v1/jobs/{job_id}"] == "jobs-cancel"
     assert ids["GET /v1/jobs/{job_id}/trajectory"] == "jobs-trajectory"
+    assert ids["GET /v1/jobs/{job_id}/section"] == "jobs-section"
+    assert ids["GET /v1/jobs/{job_id}/plots/{name}.{fmt}"] == "jobs-plot"
+    assert ids["GET /v1/ensembles/{ensemble_id}/plots/{name}.{fmt}"] == "ensembles-plot"
     assert ids["POST /v1/ensembles"] == "ensembles-submit" and ids["GET /v1/ensembles/{ensemble_id}"] == "ensembles-get"
     assert ids["DELETE /v1/ensembles/{ensemble_id}"] == "ensembles-cancel"
     assert ids["GET /v1/ensembles/{ensemble_id}/poincare"] == "ensembles-section"
@@ -165,19 +166,57 @@ def test_the_document_states_the_deployments_limits(monkeypatch):
         get_settings.cache_clear()
 
 
+BYTES = {"type": "string", "format": "binary"}
+#: Every download: its path, and the media types its 200 declares (application/octet-stream first).
+DOWNLOADS = {
+    "/v1/jobs/{job_id}/trajectory": ["application/octet-stream", "application/json", "text/csv",
+                                     "application/x-netcdf"],
+    "/v1/jobs/{job_id}/section": ["application/octet-stream", "application/json", "text/csv", "application/x-netcdf"],
+    "/v1/ensembles/{ensemble_id}/poincare": ["application/octet-stream", "text/csv", "application/x-netcdf"],
+    "/v1/jobs/{job_id}/plots/{name}.{fmt}": ["application/octet-stream", "image/png", "image/svg+xml"],
+    "/v1/ensembles/{ensemble_id}/plots/{name}.{fmt}": ["application/octet-stream", "image/png", "image/svg+xml"],
+}
+
+
 def test_binary_and_text_answers_declare_their_media_types(spec):
+    """A download's 200 lists application/octet-stream first (a generated client reads the bytes), then every
+    media type the route answers, each a binary string but the JSON (its model)."""
     paths = spec["paths"]
-    trajectory = paths["/v1/jobs/{job_id}/trajectory"]["get"]["responses"]["200"]["content"]
-    assert set(trajectory) == {"application/json", "text/csv", "application/octet-stream"}
-    assert trajectory["application/octet-stream"]["schema"] == {"type": "string", "format": "binary"}
-    assert set(paths["/v1/ensembles/{ensemble_id}/poincare"]["get"]["responses"]["200"]["content"]) == {
-        "text/csv", "application/octet-stream"}
+    for path, media_types in DOWNLOADS.items():
+        content = paths[path]["get"]["responses"]["200"]["content"]
+        assert list(content) == media_types, path
+        assert all(content[m]["schema"] == BYTES for m in media_types if m != "application/json"), path
+    assert paths["/v1/jobs/{job_id}/trajectory"]["get"]["responses"]["200"]["content"]["application/json"][
+        "schema"] == {"$ref": "#/components/schemas/TrajectoryExport"}
+    assert paths["/v1/jobs/{job_id}/section"]["get"]["responses"]["200"]["content"]["application/json"][
+        "schema"] == {"$ref": "#/components/schemas/SectionExport"}
+    for path in ("/v1/jobs/{job_id}/trajectory", "/v1/jobs/{job_id}/section"):
+        (fmt,) = [p for p in paths[path]["get"]["parameters"] if p["name"] == "format"]
+        assert fmt["schema"]["enum"] == ["json", "csv", "npz", "netcdf"] and fmt["in"] == "query"
     assert set(paths["/v1/paper/report/{job_id}"]["get"]["responses"]["200"]["content"]) == {"text/html"}
+
+
+def test_sections_and_spectra_have_models(spec):
+    """A job's and a member's ``poincare`` and ``lyapunov`` are typed, and the models hold every field the
+    core's Section and Spectrum give (nothing the service sends goes undocumented)."""
+    from dataclasses import fields
+
+    from nonholonomic.analysis.lyapunov import Spectrum
+    from nonholonomic.analysis.poincare import Section
+
+    schemas = spec["components"]["schemas"]
+    for model in ("SimulationResultModel", "MemberResultModel"):
+        props = schemas[model]["properties"]
+        assert {"$ref": "#/components/schemas/SectionResult"} in props["poincare"]["anyOf"], model
+        assert {"$ref": "#/components/schemas/SpectrumResult"} in props["lyapunov"]["anyOf"], model
+    assert set(schemas["SectionResult"]["properties"]) == {"count", *(f.name for f in fields(Section))}
+    assert set(schemas["SpectrumResult"]["properties"]) == {f.name for f in fields(Spectrum)}
+    assert set(schemas["SectionExport"]["properties"]) == {*schemas["SectionResult"]["properties"], "units"}
 
 
 def test_typed_answers(spec):
     """The catalog, the symbolic routes, the maps, the claims, health and the members page have models."""
-    refs = {("GET", "/v1/systems"): "Catalog", ("GET", "/v1/systems/{kind}"): "SystemDescription",
+    refs = {("GET", "/v1/systems"): "Catalog",
             ("POST", "/v1/brackets/verify"): "BracketVerifyResult", ("POST", "/v1/hamiltonize"): "HamiltonizeResult",
             ("GET", "/v1/hamiltonize/examples"): "HamiltonizeExamples", ("GET", "/v1/maps"): "MapList",
             ("POST", "/v1/maps/{name}"): "MapResult", ("GET", "/v1/paper/claims"): "ClaimList",
@@ -185,6 +224,10 @@ def test_typed_answers(spec):
     for (method, path), name in refs.items():
         schema = spec["paths"][path][method.lower()]["responses"]["200"]["content"]["application/json"]["schema"]
         assert schema == {"$ref": f"#/components/schemas/{name}"}, (method, path)
+    # a kind of the catalog, or the generalized Chaplygin system of one's own (GET /v1/systems/generalized_chaplygin)
+    kind = spec["paths"]["/v1/systems/{kind}"]["get"]["responses"]["200"]["content"]["application/json"]["schema"]
+    assert kind["anyOf"] == [{"$ref": "#/components/schemas/SystemDescription"},
+                             {"$ref": "#/components/schemas/CatalogGeneralizedChaplygin"}]
 
 
 def test_the_ball_parameter_keeps_its_name(spec):
@@ -278,8 +321,9 @@ def test_generated_client_submits_polls_and_reads_a_ball_job(generated, client):
     result = view.result
     assert result.system.kind == "chaplygin_ball" and result.t_final == pytest.approx(2.0)
     assert {i.name for i in result.integrals} >= {"energy", "area"} and all(i.passed for i in result.integrals)
-    samples = jobs_trajectory.sync(accepted.parsed.id, client=api)
-    assert len(samples.t) == 11 and samples.units["t"] == "s"
+    assert len(result.trajectory.t) == 11 and result.system.units["t"] == "s"
+    samples = jobs_trajectory.sync(accepted.parsed.id, client=api)  # the JSON's bytes
+    assert json.loads(samples.payload.read())["t"] == result.trajectory.t
     # problems parse into the generated Problem
     missing = jobs_get.sync_detailed("no-such-job", client=api)
     assert missing.status_code == 404 and isinstance(missing.parsed, Problem) and missing.parsed.status == 404
@@ -304,3 +348,96 @@ def test_generated_client_reads_every_typed_answer(generated, client):
     assert "general.theorem_1" in claims.claims
     examples = import_module(f"{CLIENT_PACKAGE}.api.symbolic.symbolic_hamiltonize_examples").sync(client=api)
     assert examples.examples["chaplygin_ball"].monopole.shift == ["0", "c*N*cos(theta)"]
+
+
+#: A ball job with a section (a dozen crossings) and two exponents; an ensemble with both.
+SECTION_JOB = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+               "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 200.0, "samples": 21,
+               "poincare": {"surface": "gamma3", "direction": "both", "coordinates": ["gamma1", "gamma2"],
+                            "max_points": 50},
+               "lyapunov": {"count": 2, "interval": 1.0}}
+SECTION_ENSEMBLE = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+                    "members": {"sample": {"count": 3, "seed": 7, "level": {"energy": 1.0, "area": 0.0}}},
+                    "t_final": 60.0, "samples": 3, "poincare": {"surface": "gamma3"}, "lyapunov": {"count": 1}}
+
+
+def _finished(client, path: str, body: dict[str, Any]) -> str:
+    r = client.post(path, json=body)
+    assert r.status_code == 202, r.text
+    deadline = time.monotonic() + 120
+    while (view := client.get(r.headers["location"]).json())["status"] in ("queued", "running"):
+        assert time.monotonic() < deadline, view
+        time.sleep(0.02)
+    assert view["status"] == "succeeded", view
+    return view["id"]
+
+
+def test_generated_client_downloads_every_file_as_its_exact_bytes(generated, client):
+    """Every download route through the generated client (default generator settings): trajectory and
+    section in every format, the ensemble's section, every plot; the bytes are what httpx gets directly,
+    and the section, spectrum and generalized Chaplygin entry parse into their models."""
+    from importlib import import_module
+
+    def api_module(tag: str, name: str) -> Any:
+        return import_module(f"{CLIENT_PACKAGE}.api.{tag}.{name}")
+
+    def model(module: str, name: str) -> Any:
+        return getattr(import_module(f"{CLIENT_PACKAGE}.models.{module}"), name)
+
+    File = import_module(f"{CLIENT_PACKAGE}.types").File
+    api = generated.Client(base_url=str(client.base_url))
+    api.set_httpx_client(client)
+    job_id = _finished(client, "/v1/jobs", SECTION_JOB)
+    ensemble_id = _finished(client, "/v1/ensembles", SECTION_ENSEMBLE)
+
+    calls = []  # (what, the generated call's answer, the direct GET's path and params)
+    for op, path in (("jobs_trajectory", "trajectory"), ("jobs_section", "section")):
+        Format = model(f"{op}_format", "".join(w.title() for w in op.split("_")) + "Format")
+        for fmt in ("json", "csv", "npz", "netcdf"):
+            answer = api_module("jobs", op).sync_detailed(job_id, client=api, format_=Format(fmt))
+            calls.append((f"{path} {fmt}", answer, f"/v1/jobs/{job_id}/{path}", {"format": fmt}))
+    Format = model("ensembles_section_format", "EnsemblesSectionFormat")
+    for fmt in ("csv", "npz", "netcdf"):
+        answer = api_module("ensembles", "ensembles_section").sync_detailed(ensemble_id, client=api,
+                                                                              format_=Format(fmt))
+        calls.append((f"ensemble section {fmt}", answer, f"/v1/ensembles/{ensemble_id}/poincare", {"format": fmt}))
+    for tag, ident, names in (("jobs", job_id, ("trajectory", "integrals", "poincare", "lyapunov")),
+                              ("ensembles", ensemble_id, ("poincare", "exponents"))):
+        Name, Fmt = model(f"{tag}_plot_name", f"{tag.title()}PlotName"), model(f"{tag}_plot_fmt", f"{tag.title()}PlotFmt")
+        for name in names:
+            for fmt in ("png", "svg"):
+                answer = api_module(tag, f"{tag}_plot").sync_detailed(ident, Name(name), Fmt(fmt), client=api)
+                calls.append((f"{tag} plot {name}.{fmt}", answer, f"/v1/{tag}/{ident}/plots/{name}.{fmt}", {}))
+
+    magic = {"npz": b"PK", "netcdf": b"\x89HDF", "png": b"\x89PNG", "svg": b"<?xml"}
+    for what, answer, path, params in calls:
+        direct = client.get(path, params=params)
+        assert answer.status_code == 200 == direct.status_code, (what, answer.content[:300])
+        assert isinstance(answer.parsed, File), (what, type(answer.parsed))
+        data = answer.parsed.payload.read()
+        assert data == direct.content and data, what
+        suffix = what.rsplit(" ", 1)[1].rsplit(".", 1)[-1]
+        assert data.startswith(magic.get(suffix, b"")), what
+    assert len(calls) == 8 + 3 + 12
+
+    # typed: the job's section and spectrum, a member's, the generalized Chaplygin entry
+    SectionResult, SpectrumResult = model("section_result", "SectionResult"), model("spectrum_result", "SpectrumResult")
+    view = api_module("jobs", "jobs_get").sync(job_id, client=api)
+    section, spectrum = view.result.poincare, view.result.lyapunov
+    assert isinstance(section, SectionResult) and isinstance(spectrum, SpectrumResult)
+    served = client.get(f"/v1/jobs/{job_id}").json()["result"]
+    assert section.count == served["poincare"]["count"] >= 5 and section.t == served["poincare"]["t"]
+    assert section.points["gamma"] == served["poincare"]["points"]["gamma"]
+    assert str(section.direction) == "both" and section.coordinate_names == ["gamma1", "gamma2"]
+    assert spectrum.exponents == served["lyapunov"]["exponents"] and len(spectrum.exponents) == 2
+    assert spectrum.expected_zero[0].reason == served["lyapunov"]["expected_zero"][0]["reason"]
+    assert section.to_dict() == served["poincare"] and spectrum.to_dict() == served["lyapunov"]
+    page = api_module("ensembles", "ensembles_members").sync(ensemble_id, client=api)
+    assert all(isinstance(m.poincare, SectionResult) and isinstance(m.lyapunov, SpectrumResult)
+               for m in page.members)
+    entry = api_module("systems", "systems_get").sync("generalized_chaplygin", client=api)
+    assert isinstance(entry, model("catalog_generalized_chaplygin", "CatalogGeneralizedChaplygin"))
+    assert entry.kind == "generalized_chaplygin" and entry.to_dict() == client.get(
+        "/v1/systems/generalized_chaplygin").json()
+    ball = api_module("systems", "systems_get").sync("chaplygin_ball", client=api)
+    assert isinstance(ball, model("system_description", "SystemDescription"))

@@ -13,7 +13,7 @@ import pytest
 from matplotlib.image import imread
 
 from nonholonomic.systems import SYSTEMS, get_system
-from service import plots
+from service import plot_ensemble, plot_orbit, plots
 from service.plots import PNG_DPI, PlotUnavailable, ensemble_plot, job_plot
 from tests.api.conftest import BALL, STATE
 from tests.support import poll_job
@@ -260,7 +260,7 @@ def test_a_long_trajectory_is_plotted_quickly():
             assert elapsed < 3.0, (name, fmt, elapsed)
             assert len(data) < 3_000_000
     fig = plots._trajectory_figure(result, body)
-    assert len(fig.axes[0].get_lines()[0].get_data_3d()[0]) <= plots.MAX_LINE_POINTS
+    assert len(fig.axes[0].get_lines()[0].get_data_3d()[0]) <= plot_orbit.MAX_POINTS  # dense output, capped
     drift = plots._integrals_figure(result, body).axes[0].get_lines()[0]
     energy = result["integrals"][0]
     assert len(drift.get_ydata()) <= plots.MAX_LINE_POINTS
@@ -283,7 +283,7 @@ def test_ensemble_section_and_exponents(client):
                "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "gamma2"]},
                "lyapunov": {"count": 1, "interval": 1.0}}
     view, members = _ensemble(client, sampled)
-    ax = plots._ensemble_poincare_figure(view, iter(members)).axes[0]
+    ax = plot_ensemble._ensemble_poincare_figure(view, iter(members)).axes[0]
     drawn = ax.collections[0]
     assert len(drawn.get_offsets()) == sum(m["poincare"]["count"] for m in members)
     assert sorted(set(drawn.get_array().tolist())) == [m["index"] for m in members if m["poincare"]["count"]]
@@ -292,7 +292,7 @@ def test_ensemble_section_and_exponents(client):
         assert _png_size(ensemble_plot(name, view, iter(members), "png"))[0] > 100
         texts = _svg_texts(ensemble_plot(name, view, members, "svg"))
         assert "chaplygin_ball" in texts and ("γ₂ [1]" in texts if name == "poincare" else "[1/s]" in texts)
-    histogram = plots._ensemble_exponents_figure(view, members).axes[0]
+    histogram = plot_ensemble._ensemble_exponents_figure(view, members).axes[0]
     assert sum(p.get_height() for p in histogram.patches) == len(members)
 
     no_analysis = [{k: v for k, v in m.items() if k not in ("poincare", "lyapunov")} for m in members]
@@ -305,7 +305,7 @@ def test_ensemble_section_and_exponents(client):
     sweep = {"system": dict(BALL), "members": members,
              "t_final": 30.0, "samples": 3, "checks": ["integrals"], "lyapunov": {"count": 1, "interval": 1.0}}
     view, members = _ensemble(client, sweep)
-    ax = plots._ensemble_exponents_figure(view, members).axes[0]
+    ax = plot_ensemble._ensemble_exponents_figure(view, members).axes[0]
     line = ax.get_lines()[0]
     assert line.get_xdata().tolist() == sorted(values)
     largest = {m["label"]["value"]: m["lyapunov"]["exponents"][0] for m in members}

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from client import ApiError, Client
-from tests.support import free_port, start_api, stop, wait_healthy
+from nonholonomic_client import ApiError, Client
+from tests.support import embedded_api, free_port
 
 pytestmark = pytest.mark.integration
 
@@ -40,18 +40,8 @@ CLAIMS = ["veselova.multiplier", "ball.theorem_3"]
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory) -> Iterator[str]:
-    logs = tmp_path_factory.mktemp("client-api")
-    port = free_port()
-    api = start_api(port, logs / "api.log", {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false"})
-    url = f"http://127.0.0.1:{port}"
-    try:
-        wait_healthy(url, timeout=120)
+    with embedded_api(tmp_path_factory.mktemp("client-api")) as url:
         yield url
-    except Exception:
-        print((logs / "api.log").read_text()[-4000:])
-        raise
-    finally:
-        stop(api)
 
 
 @pytest.fixture(scope="module")
@@ -182,6 +172,8 @@ def test_cli_systems_lists_the_kinds(base):
     done = _cli(base, "systems")
     assert done.returncode == 0, done.stderr
     assert "chaplygin_ball" in done.stdout and "M, gamma" in done.stdout
+    generalized = [line.split() for line in done.stdout.splitlines() if line.startswith("generalized_chaplygin ")]
+    assert generalized and generalized[0][1:3] == ["q,", "qdot"]  # the user-written kind, its own entry's shape
     raw = _cli(base, "systems", "--json")
     assert raw.returncode == 0 and "chaplygin_ball" in [s["kind"] for s in json.loads(raw.stdout)["systems"]]
 

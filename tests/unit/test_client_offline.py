@@ -9,10 +9,10 @@ import sys
 import httpx
 import pytest
 
-from client import ApiError, Client, JobFailed, ProgressBar
-from client.cli import main
-from client.processes import serve_command, worker_command
-from client.progress import render_bar
+from nonholonomic_client import ApiError, Client, JobFailed, ProgressBar
+from nonholonomic_client.cli import main
+from nonholonomic_client.processes import serve_command, worker_command
+from nonholonomic_client.progress import render_bar
 
 PROBLEM = {"type": "/problems/invalid-request", "title": "Invalid request", "status": 422,
            "detail": "system.inertia[0]: Input should be greater than 0", "instance": "/v1/jobs",
@@ -193,7 +193,7 @@ def test_serve_and_worker_commands():
 
 
 def _cli_against(monkeypatch, handler) -> None:
-    from client import commands
+    from nonholonomic_client import commands
 
     monkeypatch.setattr(commands, "_client", lambda args: Client(args.url, transport=httpx.MockTransport(handler)))
 
@@ -232,7 +232,7 @@ def test_cli_exit_codes_for_a_failed_job_and_a_server_error(tmp_path, capsys, mo
 def test_the_client_sends_its_api_key_as_a_bearer_token(monkeypatch):
     import httpx
 
-    from client import Client
+    from nonholonomic_client import Client
 
     seen: list[str | None] = []
 
@@ -254,8 +254,8 @@ def test_the_client_sends_its_api_key_as_a_bearer_token(monkeypatch):
 def test_wait_honours_retry_after_of_a_429_and_503(monkeypatch):
     import httpx
 
-    from client import ApiError, Client
-    import client.api as api_module
+    from nonholonomic_client import ApiError, Client
+    import nonholonomic_client.base as api_module
 
     answers = [
         httpx.Response(429, json={"title": "Rate limit", "status": 429, "detail": "slow down"}, headers={"Retry-After": "2"}),

@@ -33,9 +33,12 @@ def systems_table(catalog: Mapping[str, Any]) -> str:
     str
     """
     rows = [("KIND", "STATE", "TITLE")]
-    for s in catalog.get("systems", []):
-        rows.append((str(s.get("kind")), ", ".join(str(v.get("name")) for v in s.get("state", [])),
-                     str(s.get("title", ""))))
+    entries = list(catalog.get("systems", []))
+    if isinstance(catalog.get("generalized_chaplygin"), Mapping):  # a system written by the user, its own shape
+        entries.append(catalog["generalized_chaplygin"])
+    for s in entries:
+        state = [str(v.get("name")) if isinstance(v, Mapping) else str(v) for v in s.get("state", [])]
+        rows.append((str(s.get("kind")), ", ".join(state), str(s.get("title", ""))))
     return "\n".join(_table(rows))
 
 

@@ -15,10 +15,10 @@ import os
 import sys
 from collections.abc import Sequence
 
-from client import commands
-from client.api import default_url
-from client.errors import ApiError, JobFailed
-from client.processes import execute, serve_command, worker_command
+from nonholonomic_client import commands
+from nonholonomic_client.api import default_url
+from nonholonomic_client.errors import ApiError, JobFailed
+from nonholonomic_client.processes import execute, serve_command, worker_command
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_UNREACHABLE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 

@@ -6,6 +6,7 @@ Celery, so signals (Ctrl-C, SIGTERM from a supervisor) reach the server directly
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import socket
 import sys
@@ -129,6 +130,32 @@ def worker_command(concurrency: int | None, environ: Mapping[str, str]) -> tuple
     return argv, env, f"nonholonomic worker on queue {queue!r} through {redacted(url)}"
 
 
+#: The modules ``serve`` and ``worker`` need: the server's install, not the client's alone.
+SERVER_MODULES = {"uvicorn": ("service", "uvicorn"), "celery": ("workers", "celery")}
+
+
+def missing_server(argv: list[str]) -> str | None:
+    """Why ``argv`` (a ``serve`` or ``worker`` command) cannot run here, or None if it can.
+
+    Parameters
+    ----------
+    argv : list of str
+        From :func:`serve_command` or :func:`worker_command`.
+
+    Returns
+    -------
+    str or None
+        A message naming the missing modules and the install that brings them.
+    """
+    needed = SERVER_MODULES.get(argv[2] if len(argv) > 2 else "", ())
+    missing = [m for m in needed if importlib.util.find_spec(m) is None]
+    if not missing:
+        return None
+    return (f"this command needs the server, which is not installed here (no module {', '.join(missing)}): "
+            "install it from a checkout with `pip install -e .` (or `python3 scripts/serve.py`); "
+            "the client alone (nonholonomic-client) talks to a running API")
+
+
 def execute(argv: list[str], env: dict[str, str], banner: str) -> NoReturn:
     """Print ``banner`` and replace this process with ``argv``.
 
@@ -137,7 +164,16 @@ def execute(argv: list[str], env: dict[str, str], banner: str) -> NoReturn:
     argv : list of str
     env : dict
     banner : str
+
+    Raises
+    ------
+    SystemExit
+        With a message (exit code 2) when the server is not installed.
     """
+    reason = missing_server(argv)
+    if reason is not None:
+        print(f"nonholonomic: {reason}", file=sys.stderr)
+        raise SystemExit(2)
     print(banner, flush=True)
     sys.stderr.flush()
     os.execve(argv[0], argv, env)

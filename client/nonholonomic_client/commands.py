@@ -14,9 +14,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from client.api import Client, Progress
-from client.progress import ProgressBar
-from client.summaries import ensemble_summary, job_summary, report_summary, systems_table
+from nonholonomic_client.api import Client, Progress
+from nonholonomic_client.progress import ProgressBar
+from nonholonomic_client.summaries import ensemble_summary, job_summary, report_summary, systems_table
 
 
 class UsageError(Exception):

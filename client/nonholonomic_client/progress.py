@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from typing import Self, TextIO
 
@@ -97,6 +98,74 @@ class ProgressBar:
             self.stream.write("\n")
             self.stream.flush()
             self._open = False
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class TqdmProgress:
+    """A callable ``progress(fraction, status)`` that drives a tqdm bar in units of ``total``: simulated
+    seconds for a job (progress is t / t_final, so the bar and its ETA are linear in simulated time),
+    members for an ensemble. ``tqdm.auto`` draws a widget in Jupyter (with ipywidgets) and text
+    elsewhere.
+
+    Parameters
+    ----------
+    total : float
+        What a fraction of 1 stands for (e.g. ``t_final``).
+    unit : str or None
+        Its unit, e.g. ``"s"`` (simulated) or ``"members"``; None: a bar without counts.
+    label : str, optional
+        The bar's description (e.g. the job id's first characters).
+    file : file-like, optional
+        Where a text bar goes (default ``sys.stderr``).
+
+    Raises
+    ------
+    ImportError
+        Without tqdm (the client's ``[notebook]`` extra).
+    """
+
+    def __init__(self, total: float, unit: str | None, label: str = "", file: TextIO | None = None) -> None:
+        try:
+            with warnings.catch_warnings():  # "IProgress not found": Jupyter without ipywidgets gets text
+                warnings.simplefilter("ignore")
+                from tqdm.auto import tqdm
+        except ImportError as exc:
+            raise ImportError("progress=True needs tqdm: pip install 'nonholonomic-client[notebook]'") from exc
+        self.total = float(total) if total and math.isfinite(total) and total > 0 else 1.0
+        counts = "" if unit is None else "{n:.4g}/{total:.4g} " + unit + " "
+        fmt = "{l_bar}{bar}| " + counts + "[{elapsed}<{remaining}] {postfix}"
+        self.bar = tqdm(total=self.total, desc=label or None, unit=unit or "it", bar_format=fmt, file=file,
+                        dynamic_ncols=True, leave=True)
+        self._status = ""
+
+    def __call__(self, fraction: float, status: str) -> None:
+        """Move the bar to ``fraction`` of ``total`` and show ``status``.
+
+        Parameters
+        ----------
+        fraction : float
+            Progress in [0, 1].
+        status : str
+            The job's status.
+        """
+        f = 0.0 if not math.isfinite(fraction) else min(max(fraction, 0.0), 1.0)
+        target = f * self.total
+        if status != self._status:
+            self._status = status
+            self.bar.set_postfix_str(status, refresh=False)
+        if target > self.bar.n:
+            self.bar.update(target - self.bar.n)  # redraws (at most every tqdm's mininterval)
+        elif status == "succeeded" or self.bar.n == 0:
+            self.bar.refresh()
+
+    def close(self) -> None:
+        """Close the bar (it stays on screen)."""
+        self.bar.close()
 
     def __enter__(self) -> Self:
         return self

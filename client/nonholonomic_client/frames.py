@@ -1,0 +1,339 @@
+"""Results as labelled arrays and tables: the API's JSON turned into xarray and pandas objects.
+
+Every value is the JSON's float, unchanged (``float64`` holds a JSON number exactly as Python parses
+it), so a Dataset or a DataFrame equals the JSON bit for bit. pandas and xarray are the client's
+``[notebook]`` extra and are imported only here, when first asked for.
+
+Column names are those of the CSV downloads without the unit: ``t``, ``tau``, then each vector's
+components ``M1 M2 M3 gamma1 ...``; units go to ``attrs["units"]`` (xarray: each variable's
+``units`` attribute).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    import pandas
+    import xarray
+
+#: How to install what this module needs.
+EXTRA_HINT = "pip install 'nonholonomic-client[notebook]' (pandas, xarray and tqdm)"
+
+
+def _pandas() -> Any:
+    try:
+        import pandas
+    except ImportError as exc:
+        raise ImportError(f"tables need pandas: {EXTRA_HINT}") from exc
+    return pandas
+
+
+def _xarray() -> Any:
+    try:
+        import xarray
+    except ImportError as exc:
+        raise ImportError(f"labelled arrays need xarray: {EXTRA_HINT}") from exc
+    return xarray
+
+
+def components(samples: Mapping[str, Any], skip: Iterable[str] = ("t", "tau", "units")) -> dict[str, np.ndarray]:
+    """Each vector of ``samples`` split into its components, in order: ``{"M1": ..., "gamma3": ...}``.
+
+    Parameters
+    ----------
+    samples : mapping
+        ``{"M": [[M1, M2, M3], ...], "gamma": [...], ...}`` (a trajectory, or a section's ``points``).
+    skip : iterable of str
+        Keys that are not vectors.
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        One float64 array per component.
+    """
+    out: dict[str, np.ndarray] = {}
+    for name, values in samples.items():
+        if name in skip or values is None:
+            continue
+        array = np.asarray(values, dtype=np.float64)
+        array = array.reshape(len(array), -1)
+        for k in range(array.shape[1]):
+            out[f"{name}{k + 1}"] = array[:, k]
+    return out
+
+
+def _unit_of(column: str, units: Mapping[str, str]) -> str:
+    if column in units:
+        return units[column]
+    return units.get(column.rstrip("0123456789"), "")
+
+
+def evidence(result: Mapping[str, Any]) -> dict[str, Any]:
+    """The evidence of a job's result in short: each integral's drift and verdict, each check's verdict.
+
+    Parameters
+    ----------
+    result : mapping
+        A job's ``result``.
+
+    Returns
+    -------
+    dict
+        ``{"integrals": {name: {"max_rel_drift", "tolerance", "passed"}}, "checks": {name: passed}}``.
+    """
+    return {"integrals": {i["name"]: {"max_rel_drift": i["max_rel_drift"], "tolerance": i["tolerance"],
+                                      "passed": i["passed"]} for i in result.get("integrals", [])},
+            "checks": {c["name"]: c["passed"] for c in result.get("checks", [])}}
+
+
+def provenance(view: Mapping[str, Any]) -> dict[str, str]:
+    """The attributes that say where numbers come from: the job, its request, versions and evidence.
+
+    Strings only (JSON where structured), so that ``Dataset.to_netcdf`` keeps them.
+
+    Parameters
+    ----------
+    view : mapping
+        The job's view (``GET /v1/jobs/{id}``, the summary is enough).
+
+    Returns
+    -------
+    dict of str to str
+    """
+    result = view.get("result") or {}
+    system = result.get("system") or {}
+    integration = result.get("integration") or {}
+    return {"job": str(view.get("id", "")), "system": str(system.get("kind", "")),
+            "title": str(system.get("title", "")), "equation": str(system.get("equation", "")),
+            "request": json.dumps(view.get("request"), sort_keys=True),
+            "versions": json.dumps(integration.get("versions", {}), sort_keys=True),
+            "evidence": json.dumps(evidence(result), sort_keys=True),
+            "source": "nonholonomic (Borisov & Mamaev, 'Hamiltonization of nonholonomic systems')"}
+
+
+def trajectory_columns(trajectory: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """``t``, ``tau`` (when there is one) and every component of a trajectory's JSON, as arrays.
+
+    Parameters
+    ----------
+    trajectory : mapping
+        ``GET /v1/jobs/{id}/trajectory`` (format json).
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+    """
+    columns = {"t": np.asarray(trajectory["t"], dtype=np.float64)}
+    if trajectory.get("tau") is not None:
+        columns["tau"] = np.asarray(trajectory["tau"], dtype=np.float64)
+    return {**columns, **components(trajectory)}
+
+
+def trajectory_dataset(trajectory: Mapping[str, Any], view: Mapping[str, Any]) -> xarray.Dataset:
+    """A job's trajectory as an :class:`xarray.Dataset` over the dimension ``t``.
+
+    Parameters
+    ----------
+    trajectory : mapping
+        ``GET /v1/jobs/{id}/trajectory`` (format json): ``units``, ``t``, ``tau`` and each vector.
+    view : mapping
+        The job's (summary) view: request, versions and evidence go to ``attrs``.
+
+    Returns
+    -------
+    xarray.Dataset
+        One variable per component (``M1`` ... ``gamma3``) and ``tau``, each with ``units`` and
+        ``long_name``; the coordinate ``t`` in the unit of ``units["t"]``.
+    """
+    xr = _xarray()
+    units = trajectory.get("units", {})
+    columns = trajectory_columns(trajectory)
+    t = columns.pop("t")
+    data = {name: ("t", values, {"units": _unit_of(name, units), "long_name": _long_name(name, view)})
+            for name, values in columns.items()}
+    coords = {"t": ("t", t, {"units": units.get("t", "s"), "long_name": "physical time t"})}
+    return xr.Dataset(data, coords=coords, attrs=provenance(view))
+
+
+def _long_name(column: str, view: Mapping[str, Any]) -> str:
+    if column == "tau":
+        time = ((view.get("result") or {}).get("time") or {})
+        return str(time.get("tau") or "reduced time tau")
+    vector = column.rstrip("0123456789")
+    return f"{vector} component {column[len(vector):]}"
+
+
+def trajectory_frame(trajectory: Mapping[str, Any], view: Mapping[str, Any]) -> pandas.DataFrame:
+    """A job's trajectory as a :class:`pandas.DataFrame`, one row per sample, indexed by ``t``.
+
+    Parameters
+    ----------
+    trajectory, view : mapping
+        As for :func:`trajectory_dataset`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``tau``, ``M1`` ...; ``attrs`` holds ``units`` and the provenance.
+    """
+    pd = _pandas()
+    columns = trajectory_columns(trajectory)
+    frame = pd.DataFrame(columns).set_index("t")
+    frame.attrs = {"units": dict(trajectory.get("units", {})), **provenance(view)}
+    return frame
+
+
+def section_frame(sections: Iterable[tuple[int | None, Mapping[str, Any]]], units: Mapping[str, str],
+                  attrs: Mapping[str, Any]) -> pandas.DataFrame:
+    """Poincaré crossings as a table: one row per crossing, ``member`` (ensembles), ``t``, ``tau`` and
+    every component of the state at the crossing.
+
+    Parameters
+    ----------
+    sections : iterable of (member or None, section)
+        Each section as the JSON has it: ``t``, ``tau``, ``points`` (``{"M": [[...]], ...}``).
+    units : mapping
+        The system's units (``t``, ``tau``, ``M``, ...).
+    attrs : mapping
+        Stored in ``frame.attrs`` with the units.
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
+    pd = _pandas()
+    frames = []
+    for member, section in sections:
+        columns: dict[str, Any] = {}
+        t = np.asarray(section["t"] if section.get("t") is not None else [], dtype=np.float64)
+        if member is not None:
+            columns["member"] = np.full(len(t), member, dtype=np.int64)
+        columns["t"] = t
+        if section.get("tau") is not None:
+            columns["tau"] = np.asarray(section["tau"], dtype=np.float64)
+        columns.update(components(section.get("points") or {}))
+        frames.append(pd.DataFrame(columns))
+    frame = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame({"t": np.zeros(0)})
+    frame.index.name = "crossing"
+    frame.attrs = {"units": dict(units), **attrs}
+    return frame
+
+
+def section_npz_frame(arrays: Mapping[str, np.ndarray], attrs: Mapping[str, Any]) -> pandas.DataFrame:
+    """An ensemble's section NPZ (``member``, ``t``, ``tau``, each vector ``(n, 3)``) as a table.
+
+    Parameters
+    ----------
+    arrays : mapping
+        ``numpy.load`` of ``GET /v1/ensembles/{id}/poincare?format=npz``.
+    attrs : mapping
+        Stored in ``frame.attrs``.
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
+    units = json.loads(str(arrays["units_json"])) if "units_json" in arrays else {}
+    request = str(arrays["request_json"]) if "request_json" in arrays else ""
+    section = {"t": arrays.get("t", np.zeros(0)), "tau": arrays.get("tau"),
+               "points": {k: v for k, v in arrays.items()
+                          if k not in ("member", "t", "tau", "request_json", "units_json")}}
+    frame = section_frame([(None, section)], units, {**attrs, "request": request})
+    if "member" in arrays:
+        frame.insert(0, "member", np.asarray(arrays["member"], dtype=np.int64))
+    return frame
+
+
+def members_frame(members: Iterable[Mapping[str, Any]]) -> pandas.DataFrame:
+    """An ensemble's members as a table, one row per member indexed by ``member``.
+
+    Columns: ``status``, ``t_final``, ``tau_final``, ``initial_M1`` ... and ``final_M1`` ...,
+    ``drift_<integral>`` (each integral's max relative drift), ``checks_passed``, ``exponent_1`` ...
+    (the Lyapunov exponents asked for), ``section_points`` and ``error``.
+
+    Parameters
+    ----------
+    members : iterable of mapping
+        The ``members`` of ``GET /v1/ensembles/{id}/members`` pages.
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
+    pd = _pandas()
+    rows = []
+    for m in members:
+        row: dict[str, Any] = {"member": m["index"], "status": m.get("status"),
+                               "t_final": m.get("t_final"), "tau_final": m.get("tau_final")}
+        for when in ("initial", "final"):
+            for name, value in components({k: [v] for k, v in (m.get(f"{when}_state") or {}).items()}).items():
+                row[f"{when}_{name}"] = value[0]
+        for integral in m.get("integrals") or []:
+            row[f"drift_{integral['name']}"] = integral["max_rel_drift"]
+        checks = m.get("checks") or []
+        row["checks_passed"] = all(c.get("passed") is not False for c in checks) if checks else None
+        for k, value in enumerate((m.get("lyapunov") or {}).get("exponents") or []):
+            row[f"exponent_{k + 1}"] = value
+        if m.get("poincare") is not None:
+            row["section_points"] = m["poincare"].get("count")
+        row["error"] = m.get("error")
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    return frame.set_index("member") if rows else frame
+
+
+def exponents_frame(lyapunov: Mapping[str, Any]) -> pandas.DataFrame:
+    """A Lyapunov spectrum as a table, one row per exponent (``i`` = 1, 2, ..., descending).
+
+    Columns: ``exponent`` (1/s), ``moved_last_20pct`` (how far the finite-time estimate still moved
+    over the last fifth of the run) and ``expected_zero`` (whether a symmetry or an integral says it
+    vanishes). ``attrs`` keeps the sum, its expected value and reason, and the warnings (e.g. "not
+    converged").
+
+    Parameters
+    ----------
+    lyapunov : mapping
+        A result's ``lyapunov``.
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
+    pd = _pandas()
+    exponents = np.asarray(lyapunov.get("all_exponents") or lyapunov.get("exponents") or [], dtype=np.float64)
+    moved = lyapunov.get("moved_last_20pct") or [None] * len(exponents)
+    zero = set(lyapunov.get("zero_indices") or [])
+    frame = pd.DataFrame({"i": np.arange(1, len(exponents) + 1), "exponent": exponents,
+                          "moved_last_20pct": np.asarray(moved[:len(exponents)], dtype=np.float64),
+                          "expected_zero": [k in zero for k in range(len(exponents))]}).set_index("i")
+    frame.attrs = {k: lyapunov.get(k) for k in ("sum", "sum_expected", "sum_reason", "divergence_average",
+                                                "measure_average", "t_final", "interval", "warnings")}
+    frame.attrs["units"] = {"exponent": "1/s"}
+    return frame
+
+
+def convergence_frame(lyapunov: Mapping[str, Any]) -> pandas.DataFrame:
+    """The running finite-time estimates of a spectrum, indexed by ``t``: column ``exponent_k``.
+
+    Parameters
+    ----------
+    lyapunov : mapping
+        A result's ``lyapunov``.
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
+    pd = _pandas()
+    rows = np.asarray(lyapunov.get("convergence") or [], dtype=np.float64)
+    rows = rows.reshape(len(rows), -1)
+    frame = pd.DataFrame({f"exponent_{k + 1}": rows[:, k] for k in range(rows.shape[1])},
+                         index=pd.Index(np.asarray(lyapunov.get("convergence_t") or [], dtype=np.float64),
+                                        name="t"))
+    frame.attrs["units"] = {"t": "s", "exponent": "1/s"}
+    return frame
