@@ -7,12 +7,14 @@ Run from the repository root::
 The API runs under uvicorn in embedded mode. One ball job with ``--samples`` samples (the service's
 maximum by default) is run once; then, each ``--repeat`` times (median reported):
 
-- ``GET /v1/jobs/{id}`` (the whole job JSON), ``GET .../trajectory?format=json|csv|npz``: bytes and
-  seconds to the last byte (streamed by httpx, not kept);
+- ``GET /v1/jobs/{id}`` (the whole job JSON), ``GET .../trajectory?format=json|csv|npz|netcdf``: bytes
+  and seconds to the last byte (streamed by httpx, not kept);
 - references measured in this process on the same arrays: ``json.dumps`` of the job view,
-  ``numpy.savetxt`` of the CSV columns (``%.17g``), ``numpy.savez`` of the arrays. The ratio
+  ``numpy.savetxt`` of the CSV columns (``%.17g``), ``numpy.savez`` of the arrays, xarray's
+  ``to_netcdf`` of the bare arrays (no attributes). The ratio
   ``HTTP / reference`` is the cost of serving it (HTTP, the backend, streaming) over writing it;
-- every plot of the job as PNG and SVG: the first request (drawn) and the second (cached), with the
+- the client's ``trajectory(format="xarray"|"pandas")`` against fetching and parsing the JSON alone;
+- every plot of the job as PNG and SVG (the trajectory drawn from dense output): the first request (drawn) and the second (cached), with the
   drawn time against ``Figure.savefig`` of the same plot in this process;
 - the peak resident memory of the API process while the CSV streams (``/proc``): streaming should
   not add a second copy of the result.
@@ -129,14 +131,39 @@ def main() -> None:
                 np.savez(buffer, **{f"c{i}": c for i, c in enumerate(columns)})
                 return len(buffer.getvalue())
 
+            def ref_netcdf() -> int:
+                import xarray as xr
+
+                names = ["tau"] + [f"{v}{k + 1}" for v in ("M", "gamma", "omega") for k in range(3)]
+                ds = xr.Dataset({n: ("t", c) for n, c in zip(names, columns[1:], strict=True)},
+                                coords={"t": columns[0]})
+                return len(ds.to_netcdf(engine="netcdf4"))
+
             rows = [("GET /v1/jobs/{id} (job JSON)", location, ref_json, "json.dumps in-process"),
                     ("trajectory?format=json", f"{location}/trajectory?format=json", ref_json, "json.dumps of the job"),
                     ("trajectory?format=csv", f"{location}/trajectory?format=csv", ref_csv, "numpy.savetxt %.17g"),
-                    ("trajectory?format=npz", f"{location}/trajectory?format=npz", ref_npz, "numpy.savez")]
+                    ("trajectory?format=npz", f"{location}/trajectory?format=npz", ref_npz, "numpy.savez"),
+                    ("trajectory?format=netcdf", f"{location}/trajectory?format=netcdf", ref_netcdf,
+                     "xarray to_netcdf, bare arrays")]
             for label, url, ref, what in rows:
                 http_s, size = _median_time(lambda url=url: _download(client, url), args.repeat)
                 ref_s, _ = _median_time(ref, args.repeat)
                 print(f"{label:34s} {size:12,d} {http_s:8.3f} {ref_s:8.3f} {http_s / ref_s:9.2f}  {what}")
+
+            # The client's arrays: the JSON fetched and turned into an xarray Dataset / a DataFrame, against
+            # the JSON fetched and parsed alone (the ratio is the cost of the labelled arrays).
+            from nonholonomic_client import Client
+
+            job_id = location.rsplit("/", 1)[-1]
+            with Client(base, timeout=300) as api:
+                def fetch_json() -> int:
+                    return len(api.trajectory(job_id)["t"])
+
+                ref_s, _ = _median_time(fetch_json, args.repeat)
+                for fmt in ("xarray", "pandas"):
+                    took, _ = _median_time(lambda fmt=fmt: api.trajectory(job_id, format=fmt), args.repeat)
+                    print(f"{'Client.trajectory(' + fmt + ')':34s} {'':12s} {took:8.3f} {ref_s:8.3f} "
+                          f"{took / ref_s:9.2f}  the JSON fetched and parsed")
 
             before, peak = _peak_rss_during(proc.pid, lambda: _download(client, f"{location}/trajectory?format=csv"))
             json_size = len(json.dumps(view).encode())
