@@ -218,7 +218,8 @@ def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary
                    f"{netCDF4.__version__})",
         "references": REFERENCES, "ensemble_id": ensemble_id, "system_kind": request["system"].get("kind", ""),
         "units": json.dumps(dict(units)), "request": json.dumps(request),
-        "evidence": json.dumps({"summary": summary}), "members_with_crossings": np.int64(len(parts["member"])),
+        "evidence": json.dumps({"summary": summary}),
+        "members_with_crossings": np.int64(sum(1 for m in parts["member"] if len(m))),
         **({} if first is None else {k: v for k, v in _section_attrs(first).items() if k != "section"}),
     }
     return _write(_variables(vectors, count, "crossing", units, labels), coords, attrs)

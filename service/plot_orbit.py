@@ -17,8 +17,10 @@ the curve's extent, the quantity a reader sees as a corner) is at most :data:`SA
 the sagitta of a smooth curve falls as 1/N², so one refinement nearly always suffices (at most
 :data:`REFINEMENTS`). At most
 :data:`MAX_POINTS` points and :data:`TIME_BUDGET_S` of integration (checked between the integrator's
-segments; beyond it the stored samples are drawn; no refinement after half of it).
-Orbits are remembered for the last :data:`CACHE_SIZE` requests (the PNG and the SVG share one).
+segments; beyond it the stored samples are drawn, and that image is not cached; no refinement after
+half of it). The budget covers the integration only: rebuilding the system and compiling its
+integrator come first (from the memo and heyoka's disk cache once a process has seen the system).
+Dense orbits are remembered for the last :data:`CACHE_SIZE` requests (the PNG and the SVG share one).
 Everything here is deterministic: the same result draws the same points.
 """
 
@@ -68,6 +70,12 @@ class Orbit:
     sagitta: float
     note: str
     stored_deviation: float = 0.0
+    cut_short: bool = False  # the stored samples because the time budget ran out: a busy machine, not the job
+
+
+class TransientImage(bytes):
+    """A rendered plot not to be cached: drawn from the stored samples because the dense output ran past
+    its time budget (a loaded machine), so a later request may draw the dense orbit."""
 
 
 class _Slow(RuntimeError):
@@ -111,14 +119,16 @@ def drawn_sagitta(t: np.ndarray, vectors: Mapping[str, np.ndarray], names: Seque
     return worst
 
 
-def stored_orbit(result: Mapping[str, Any], names: Sequence[str], why: str | None = None) -> Orbit:
-    """The job's stored samples as the orbit (``why``: the reason no dense output is drawn)."""
+def stored_orbit(result: Mapping[str, Any], names: Sequence[str], why: str | None = None,
+                 cut_short: bool = False) -> Orbit:
+    """The job's stored samples as the orbit (``why``: the reason no dense output is drawn; ``cut_short``:
+    the reason is the time budget)."""
     trajectory = result["trajectory"]
     t = np.asarray(trajectory["t"], dtype=float)
     vectors = {n: np.asarray(trajectory[n], dtype=float).reshape(len(t), -1) for n in names if trajectory.get(n)}
     worst = drawn_sagitta(t, vectors, [n for n in names if n in vectors]) if names and names[0] in vectors else 0.0
     note = f"{len(t)} stored samples" + (f" ({why})" if why else "")
-    return Orbit(t, vectors, False, worst, note)
+    return Orbit(t, vectors, False, worst, note, cut_short=cut_short)
 
 
 def _key(result: Mapping[str, Any], request: Mapping[str, Any], names: Sequence[str]) -> str:
@@ -150,10 +160,11 @@ def dense_orbit(result: Mapping[str, Any], request: Mapping[str, Any], names: Se
             _cache.move_to_end(key)
             return _cache[key]
     orbit = _compute(result, request, names)
-    with _cache_lock:
-        _cache[key] = orbit
-        while len(_cache) > CACHE_SIZE:
-            _cache.popitem(last=False)
+    if orbit.dense:  # the stored samples are cheap to draw again, and a budget's fallback must not stay
+        with _cache_lock:
+            _cache[key] = orbit
+            while len(_cache) > CACHE_SIZE:
+                _cache.popitem(last=False)
     return orbit
 
 
@@ -179,7 +190,7 @@ def _compute(result: Mapping[str, Any], request: Mapping[str, Any], names: Seque
             t, vectors, deviation = rerun.states(per, start)
             worst = drawn_sagitta(t, vectors, names)
     except _Slow:
-        return stored_orbit(result, names, f"the dense output took more than {TIME_BUDGET_S:g} s")
+        return stored_orbit(result, names, f"the dense output took more than {TIME_BUDGET_S:g} s", cut_short=True)
     except Exception as exc:  # noqa: BLE001
         return stored_orbit(result, names, f"no dense output: {_reason(exc)}")
     if not deviation <= MATCH_TOLERANCE:

@@ -117,7 +117,13 @@ def job_plot(name: str, result: dict, request: dict, fmt: str) -> bytes:
         raise PlotUnavailable("this job has no simulation result to plot (a paper report, or no result yet)")
     with _LOCK, matplotlib.rc_context(_STYLE):
         fig = _JOB_FIGURES[name](result, request)
-        return _render(fig, fmt)
+        transient = getattr(fig, "nonholonomic_transient", False)
+        data = _render(fig, fmt)
+    if transient:
+        from service.plot_orbit import TransientImage
+
+        return TransientImage(data)
+    return data
 
 
 def ensemble_plot(name: str, view: dict, members: Iterable[dict], fmt: str) -> bytes:
@@ -355,6 +361,7 @@ def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | N
     keep = _thin(len(t), MAX_POINTS)
 
     fig = _new_figure(11.0, 4.8)
+    fig.nonholonomic_transient = orbit.cut_short  # type: ignore[attr-defined]  (job_plot: not to be cached)
     if g.shape[1] == 2:  # generalized coordinates (q1, q2): the orbit in the plane
         _plane_orbit(fig.add_subplot(1, 2, 1), g, keep, t, geometric, units)
     else:

@@ -363,14 +363,15 @@ class Client(SymbolicRoutes):
         return frames.members_frame(self._every_member(ensemble_id, offset, limit))
 
     def _every_member(self, ensemble_id: str, offset: int = 0, limit: int | None = None) -> Iterator[dict[str, Any]]:
-        path, left = f"/v1/ensembles/{ensemble_id}/members", limit
-        while left is None or left > 0:
-            size = MEMBERS_PAGE if left is None else min(MEMBERS_PAGE, left)
+        """Members ``offset`` .. ``offset + limit`` page by page; a page leaves out the members of chunks not
+        done yet, so the pages advance by the indices asked for, not by the members they hold."""
+        path, end = f"/v1/ensembles/{ensemble_id}/members", None if limit is None else offset + limit
+        while end is None or offset < end:
+            size = MEMBERS_PAGE if end is None else min(MEMBERS_PAGE, end - offset)
             page = self._json("GET", path, params={"offset": offset, "limit": size})
             yield from page["members"]
-            offset += len(page["members"])
-            left = None if left is None else left - len(page["members"])
-            if not page["members"] or offset >= page["total"]:
+            offset += size
+            if offset >= page["total"]:
                 return
 
     def cancel_ensemble(self, ensemble_id: str) -> dict[str, Any]:

@@ -61,15 +61,20 @@ def components(samples: Mapping[str, Any], skip: Iterable[str] = ("t", "tau", "u
         if name in skip or values is None:
             continue
         array = np.asarray(values, dtype=np.float64)
-        array = array.reshape(len(array), -1)
+        if array.ndim == 1:  # JSON: no rows says nothing of the width (a section without crossings)
+            if array.size == 0:
+                continue
+            array = array.reshape(len(array), -1)
         for k in range(array.shape[1]):
             out[f"{name}{k + 1}"] = array[:, k]
     return out
 
 
 def _unit_of(column: str, units: Mapping[str, str]) -> str:
-    if column in units:
-        return units[column]
+    """The unit of ``t``, ``tau`` or a component: its vector's (``M2`` → ``units["M"]``), never a
+    parameter's of the same name."""
+    if column in ("t", "tau"):
+        return units.get(column, "")
     return units.get(column.rstrip("0123456789"), "")
 
 
@@ -283,8 +288,9 @@ def members_frame(members: Iterable[Mapping[str, Any]]) -> pandas.DataFrame:
             row["section_points"] = m["poincare"].get("count")
         row["error"] = m.get("error")
         rows.append(row)
-    frame = pd.DataFrame(rows)
-    return frame.set_index("member") if rows else frame
+    if not rows:  # no member done yet: the table's shape without rows
+        return pd.DataFrame({"status": pd.Series(dtype=object)}, index=pd.Index([], name="member"))
+    return pd.DataFrame(rows).set_index("member")
 
 
 def exponents_frame(lyapunov: Mapping[str, Any]) -> pandas.DataFrame:
@@ -306,10 +312,12 @@ def exponents_frame(lyapunov: Mapping[str, Any]) -> pandas.DataFrame:
     """
     pd = _pandas()
     exponents = np.asarray(lyapunov.get("all_exponents") or lyapunov.get("exponents") or [], dtype=np.float64)
-    moved = lyapunov.get("moved_last_20pct") or [None] * len(exponents)
+    moved = np.full(len(exponents), np.nan)  # given for the `count` exponents asked for, NaN for the others
+    given = np.asarray([np.nan if m is None else m for m in lyapunov.get("moved_last_20pct") or []], dtype=np.float64)
+    moved[:min(len(given), len(moved))] = given[:len(moved)]
     zero = set(lyapunov.get("zero_indices") or [])
     frame = pd.DataFrame({"i": np.arange(1, len(exponents) + 1), "exponent": exponents,
-                          "moved_last_20pct": np.asarray(moved[:len(exponents)], dtype=np.float64),
+                          "moved_last_20pct": moved,
                           "expected_zero": [k in zero for k in range(len(exponents))]}).set_index("i")
     frame.attrs = {k: lyapunov.get(k) for k in ("sum", "sum_expected", "sum_reason", "divergence_average",
                                                 "measure_average", "t_final", "interval", "warnings")}
@@ -331,7 +339,7 @@ def convergence_frame(lyapunov: Mapping[str, Any]) -> pandas.DataFrame:
     """
     pd = _pandas()
     rows = np.asarray(lyapunov.get("convergence") or [], dtype=np.float64)
-    rows = rows.reshape(len(rows), -1)
+    rows = rows.reshape(len(rows), -1) if rows.size else np.zeros((0, len(lyapunov.get("exponents") or [])))
     frame = pd.DataFrame({f"exponent_{k + 1}": rows[:, k] for k in range(rows.shape[1])},
                          index=pd.Index(np.asarray(lyapunov.get("convergence_t") or [], dtype=np.float64),
                                         name="t"))

@@ -19,6 +19,7 @@ from service.ensembles import members_page, request_units, view
 from service.errors import ProblemError, media_responses, problem_responses
 from service.exports import download, download_responses
 from service.pages import render_ensemble, render_job, render_report, render_report_status
+from service.plot_orbit import TransientImage
 from service.security import content_disposition
 
 router = APIRouter()
@@ -45,7 +46,7 @@ class _PlotCache:
                 self.items.move_to_end(key)
                 return self.items[key]
         data = make()
-        if keep:
+        if keep and not isinstance(data, TransientImage):  # a fallback a busy machine caused is drawn again
             with self.lock:
                 self.items[key] = data
                 while len(self.items) > self.size:

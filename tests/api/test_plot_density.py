@@ -109,8 +109,17 @@ def test_the_work_is_bounded_and_the_samples_are_drawn_otherwise(long_job, monke
     assert long_result["integration"]["steps"] > 2000
     monkeypatch.setattr(plot_orbit, "TIME_BUDGET_S", 0.0)
     slow = plot_orbit.dense_orbit(long_result, longer, ["gamma", "M"])
-    assert not slow.dense and "took more than 0 s" in slow.note and len(slow.t) == 201
+    assert not slow.dense and "took more than 0 s" in slow.note and len(slow.t) == 201 and slow.cut_short
+    assert not plot_orbit._cache  # a fallback the budget caused is not remembered ...
+    image = plots.job_plot("trajectory", long_result, longer, "png")
+    assert isinstance(image, plot_orbit.TransientImage)  # ... nor is its image (the route's cache skips it)
+    from service.routes.pages import _PlotCache
+
+    cache = _PlotCache(4)
+    cache.get(("job", "x"), lambda: image, keep=True)
+    assert not cache.items
     monkeypatch.setattr(plot_orbit, "TIME_BUDGET_S", 5.0)
+    assert type(plots.job_plot("trajectory", long_result, longer, "png")) is bytes  # dense again: kept
     broken = copy.deepcopy(request)
     broken["system"]["inertia"] = "not numbers"
     orbit = plot_orbit.dense_orbit(result, broken, ["gamma", "M"])

@@ -1,0 +1,236 @@
+"""The equations of motion of a user's Lagrangian system with constraints linear and homogeneous in the
+velocities: the Lagrange–d'Alembert equations with the multipliers eliminated.
+
+Lagrange–d'Alembert principle (the general form behind the paper's reduced 2-DOF eq. (2704-7); e.g.
+Neimark & Fufaev, *Dynamics of nonholonomic systems*, ch. III; Bloch, *Nonholonomic mechanics and
+control*, §5.2): for L(q, q̇, t) and constraints A(q, t) q̇ = 0 (k rows, n coordinates),
+
+    d/dt ∂L/∂q̇ − ∂L/∂q = Aᵀ λ,    A(q, t) q̇ = 0.
+
+With L at most quadratic in q̇, d/dt ∂L/∂q̇ = M q̈ + (∂²L/∂q̇∂q) q̇ + ∂²L/∂q̇∂t, so
+
+    M(q) q̈ + h(q, q̇, t) = Aᵀ λ,    M = ∂²L/∂q̇∂q̇,    h = (∂²L/∂q̇∂q) q̇ + ∂²L/∂q̇∂t − ∂L/∂q,
+
+and the constraint, differentiated along the motion, A q̈ + Ȧ q̇ = 0 (Ȧ = Σⱼ ∂A/∂qⱼ q̇ⱼ + ∂A/∂t).
+Eliminating the multipliers::
+
+    λ = (A M⁻¹ Aᵀ)⁻¹ (A M⁻¹ h − Ȧ q̇),    q̈ = M⁻¹ (Aᵀ λ − h).
+
+The differentiated constraint is what holds the motion on A q̇ = 0: the flow keeps A q̇ constant, so it
+stays zero from initial data on the constraint. The constraint forces Aᵀλ do no work on the motion
+(q̇ᵀAᵀλ = 0), so E = (q̇, ∂L/∂q̇) − L is an integral when L has no explicit t (dE/dt = −∂L/∂t).
+
+M⁻¹ is never formed: M is solved once for the k + 1 right-hand sides Aᵀ and h by LU, each entry
+brought to one fraction (``cancel``) after every step, so the expressions stay reasonably short
+without a full ``simplify``. The whole derivation runs under :func:`nonholonomic.bounded.run`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+
+import sympy as sp
+
+from nonholonomic import bounded
+from nonholonomic.lagrangian.checks import mass_matrix, number, sample_points
+from nonholonomic.lagrangian.parse import LagrangianData
+
+#: Seconds the symbolic derivation may take by default.
+DERIVATION_BUDGET_S = 60.0
+#: An entry larger than this (sympy operations) is only brought together, not cancelled.
+CANCEL_MAX_OPS = 4000
+
+
+class DerivationError(RuntimeError):
+    """The symbolic derivation did not finish within its budget, or sympy failed on it."""
+
+
+@dataclass(frozen=True)
+class EquationsOfMotion:
+    """The Lagrange–d'Alembert equations of a user's system, solved for q̈ and λ.
+
+    Attributes
+    ----------
+    q, qdot : tuple of sympy.Symbol
+        The state (q, q̇): coordinates and velocities.
+    t : sympy.Symbol
+        The time (appears in the expressions only if L or the constraints use it).
+    parameters : tuple of sympy.Symbol
+        The parameters, in the user's order; ``values`` are their values.
+    values : tuple of float
+    qddot : tuple of sympy.Expr
+        q̈ = M⁻¹(Aᵀλ − h) as functions of (q, q̇, t, parameters).
+    multipliers : tuple of sympy.Expr
+        λ = (A M⁻¹ Aᵀ)⁻¹ (A M⁻¹ h − Ȧ q̇), one per constraint.
+    energy : sympy.Expr or None
+        E = (q̇, ∂L/∂q̇) − L, an integral when L has no explicit t (else None).
+    L : sympy.Expr
+        The Lagrangian.
+    mass_matrix : sympy.ImmutableMatrix
+        M = ∂²L/∂q̇∂q̇.
+    A : sympy.ImmutableMatrix
+        The constraint matrix A(q, t), k × n.
+    constraints : tuple of sympy.Expr
+        The constraint functions A q̇ (each = 0 on the motion).
+    seconds : float
+        How long the derivation took.
+    """
+
+    q: tuple[sp.Symbol, ...]
+    qdot: tuple[sp.Symbol, ...]
+    t: sp.Symbol
+    parameters: tuple[sp.Symbol, ...]
+    values: tuple[float, ...]
+    qddot: tuple[sp.Expr, ...]
+    multipliers: tuple[sp.Expr, ...]
+    energy: sp.Expr | None
+    L: sp.Expr
+    mass_matrix: sp.ImmutableMatrix
+    A: sp.ImmutableMatrix
+    constraints: tuple[sp.Expr, ...]
+    seconds: float
+
+    @property
+    def state(self) -> tuple[sp.Symbol, ...]:
+        """``(q, q̇)``."""
+        return (*self.q, *self.qdot)
+
+    @property
+    def rhs(self) -> tuple[sp.Expr, ...]:
+        """The first-order field ``d(q, q̇)/dt = (q̇, q̈)``."""
+        return (*self.qdot, *self.qddot)
+
+    @property
+    def time_dependent(self) -> bool:
+        """Whether the field depends on t explicitly."""
+        return any(e.has(self.t) for e in self.qddot)
+
+
+def _pythagoras(expr: sp.Expr) -> sp.Expr:
+    """A polynomial ``expr`` with cos²x written 1 − sin²x for every angle x whose sine and cosine both
+    appear (its normal form modulo sin²x + cos²x − 1: degree ≤ 1 in cos x)."""
+    for x in sorted({f.args[0] for f in expr.atoms(sp.sin)} & {f.args[0] for f in expr.atoms(sp.cos)},
+                    key=sp.default_sort_key):
+        s, c = sp.Dummy("s"), sp.Dummy("c")
+        poly = sp.expand(expr.xreplace({sp.sin(x): s, sp.cos(x): c}))
+        if poly.has(x):  # x elsewhere (sin(2x), x itself): leave as is
+            continue
+        powers = sp.collect(poly, c, evaluate=False)
+        if max((sp.degree(p, c) for p in powers), default=0) < 2:
+            continue
+        rest = sp.expand(sp.Add(*(coefficient * (1 - s**2)**(int(sp.degree(p, c)) // 2) * c**(int(sp.degree(p, c)) % 2)
+                                  for p, coefficient in powers.items())))
+        expr = rest.xreplace({s: sp.sin(x), c: sp.cos(x)})
+    return expr
+
+
+def tidy(expr: sp.Expr) -> sp.Expr:
+    """``expr`` as one fraction with common factors cancelled (``cancel``), sin² + cos² = 1 used in its
+    numerator and denominator; only brought together (``together``) when it has more than
+    :data:`CANCEL_MAX_OPS` operations."""
+    if expr == 0:
+        return sp.Integer(0)
+    together = sp.together(expr)
+    if sp.count_ops(together) > CANCEL_MAX_OPS:
+        return together
+    num, den = sp.fraction(sp.cancel(together))
+    if num.has(sp.sin) or den.has(sp.sin):
+        num, den = _pythagoras(num), _pythagoras(den)
+        return sp.cancel(num / den)
+    return num / den
+
+
+def _zero_test(points: list[dict[sp.Symbol, float]]):
+    """Whether a pivot candidate (a function of q, t and the parameters) vanishes: structurally after
+    :func:`tidy`, or numerically at every sample point (an identity such as sin² + cos² − 1 that
+    ``cancel`` does not see must not become a pivot)."""
+    def is_zero(expr: sp.Expr) -> bool:
+        expr = tidy(expr)
+        if expr == 0:
+            return True
+        values = [number(expr, point) for point in points]
+        return all(value is not None and abs(value) < 1e-12 for value in values)
+
+    return is_zero
+
+
+def _solve(M: sp.Matrix, B: sp.Matrix, points: list[dict[sp.Symbol, float]]) -> sp.Matrix:
+    """``M⁻¹ B`` by LU with row pivoting (as ``sympy.Matrix.LUsolve``), tidying every entry."""
+    n = M.shape[0]
+    lu, perm = M.LUdecomposition_Simple(iszerofunc=_zero_test(points), simpfunc=tidy)
+    b = B.permute_rows(perm).as_mutable()
+    for i in range(n):  # forward: unit lower triangle
+        for j in range(i):
+            scale = lu[i, j]
+            b.zip_row_op(i, j, lambda x, y: tidy(x - scale * y))
+    for i in reversed(range(n)):  # backward: upper triangle
+        for j in range(i + 1, n):
+            scale = lu[i, j]
+            b.zip_row_op(i, j, lambda x, y: tidy(x - scale * y))
+        pivot = lu[i, i]
+        b.row_op(i, lambda x, _: tidy(x / pivot))
+    return b
+
+
+def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], float]:
+    start = time.perf_counter()
+    q, v, t, L = data.q, data.v, data.t, data.L
+    n, k = len(q), data.A.shape[0]
+    M = mass_matrix(data)
+    p = [sp.diff(L, vi) for vi in v]
+    h = sp.Matrix([tidy(sum((sp.diff(p[i], qj) * vj for qj, vj in zip(q, v)), sp.Integer(0))
+                        + sp.diff(p[i], t) - sp.diff(L, q[i])) for i in range(n)])
+    A = sp.Matrix(data.A)
+    # Ȧ q̇ = d/dt (A q̇) at fixed q̇
+    Adot_v = sp.Matrix([tidy(sum((sp.diff(f, qj) * vj for qj, vj in zip(q, v)), sp.Integer(0)) + sp.diff(f, t))
+                        for f in data.constraints])
+    points = sample_points(data)
+    X = _solve(M, A.T.row_join(h) if k else h, points)  # (M⁻¹Aᵀ | M⁻¹h)
+    W, u = X[:, :k], X[:, k]
+    if k:
+        S = (A * W).applyfunc(tidy)  # A M⁻¹ Aᵀ
+        lam = _solve(S, (A * u - Adot_v).applyfunc(tidy), points)
+    else:
+        lam = sp.zeros(0, 1)
+    qddot = (W * lam - u).applyfunc(tidy) if k else (-u).applyfunc(tidy)
+    return tuple(qddot), tuple(lam), time.perf_counter() - start
+
+
+def energy_of(data: LagrangianData) -> sp.Expr | None:
+    """E = (q̇, ∂L/∂q̇) − L, or None when L depends on t explicitly (then dE/dt = −∂L/∂t)."""
+    if data.L.has(data.t):
+        return None
+    return tidy(sum((vi * sp.diff(data.L, vi) for vi in data.v), sp.Integer(0)) - data.L)
+
+
+@lru_cache(maxsize=64)
+def derive(data: LagrangianData, budget_s: float = DERIVATION_BUDGET_S) -> EquationsOfMotion:
+    """The Lagrange–d'Alembert equations of ``data`` with the multipliers eliminated.
+
+    Parameters
+    ----------
+    data : LagrangianData
+        From :func:`nonholonomic.lagrangian.parse.parse_system` (checked: M regular, A of full rank).
+    budget_s : float
+        Seconds the symbolic work may take (:func:`nonholonomic.bounded.run`; a derivation past it goes
+        on in the background and a later call with the same data picks up its result).
+
+    Returns
+    -------
+    EquationsOfMotion
+
+    Raises
+    ------
+    DerivationError
+        Past the budget, or when sympy fails.
+    """
+    outcome = bounded.run(("lagrangian.derive", data), _derive, (data,), budget_s)
+    if outcome.status != "done":
+        raise DerivationError(f"the equations of motion could not be derived: {outcome.message}")
+    qddot, lam, seconds = outcome.value
+    return EquationsOfMotion(
+        q=data.q, qdot=data.v, t=data.t, parameters=data.parameters, values=data.values, qddot=qddot,
+        multipliers=lam, energy=energy_of(data), L=data.L, mass_matrix=sp.ImmutableMatrix(mass_matrix(data)),
+        A=data.A, constraints=data.constraints, seconds=seconds)
