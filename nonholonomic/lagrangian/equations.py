@@ -31,10 +31,11 @@ import time
 from dataclasses import dataclass
 from functools import lru_cache
 
+import numpy as np
 import sympy as sp
 
 from nonholonomic import bounded
-from nonholonomic.lagrangian.checks import mass_matrix, number, sample_points
+from nonholonomic.lagrangian.checks import mass_matrix, number, numeric_matrix, sample_points
 from nonholonomic.lagrangian.parse import LagrangianData
 
 #: Seconds the symbolic derivation may take by default.
@@ -142,16 +143,17 @@ def tidy(expr: sp.Expr) -> sp.Expr:
     return num / den
 
 
-def _zero_test(points: list[dict[sp.Symbol, float]]):
+def _zero_test(points: list[dict[sp.Symbol, float]], scales: list[float]):
     """Whether a pivot candidate (a function of q, t and the parameters) vanishes: structurally after
-    :func:`tidy`, or numerically at every sample point (an identity such as sin² + cos² − 1 that
-    ``cancel`` does not see must not become a pivot)."""
+    :func:`tidy`, or numerically at every sample point, relative to the matrix's largest entry there
+    (an identity such as sin² + cos² − 1 that ``cancel`` does not see must not become a pivot)."""
     def is_zero(expr: sp.Expr) -> bool:
         expr = tidy(expr)
         if expr == 0:
             return True
         values = [number(expr, point) for point in points]
-        return all(value is not None and abs(value) < 1e-12 for value in values)
+        return bool(values) and all(value is not None and abs(value) <= 1e-12 * scale
+                                    for value, scale in zip(values, scales))
 
     return is_zero
 
@@ -159,18 +161,21 @@ def _zero_test(points: list[dict[sp.Symbol, float]]):
 def _solve(M: sp.Matrix, B: sp.Matrix, points: list[dict[sp.Symbol, float]]) -> sp.Matrix:
     """``M⁻¹ B`` by LU with row pivoting (as ``sympy.Matrix.LUsolve``), tidying every entry."""
     n = M.shape[0]
-    lu, perm = M.LUdecomposition_Simple(iszerofunc=_zero_test(points), simpfunc=tidy)
+    numeric = [numeric_matrix(M, point) for point in points]
+    usable = [(p, float(np.max(np.abs(m)))) for p, m in zip(points, numeric) if m is not None]
+    is_zero = _zero_test([p for p, _ in usable], [s for _, s in usable])
+    lu, perm = M.LUdecomposition_Simple(iszerofunc=is_zero, simpfunc=tidy)
     b = B.permute_rows(perm).as_mutable()
     for i in range(n):  # forward: unit lower triangle
         for j in range(i):
             scale = lu[i, j]
-            b.zip_row_op(i, j, lambda x, y: tidy(x - scale * y))
+            b.zip_row_op(i, j, lambda x, y, scale=scale: tidy(x - scale * y))
     for i in reversed(range(n)):  # backward: upper triangle
         for j in range(i + 1, n):
             scale = lu[i, j]
-            b.zip_row_op(i, j, lambda x, y: tidy(x - scale * y))
+            b.zip_row_op(i, j, lambda x, y, scale=scale: tidy(x - scale * y))
         pivot = lu[i, i]
-        b.row_op(i, lambda x, _: tidy(x / pivot))
+        b.row_op(i, lambda x, _, pivot=pivot: tidy(x / pivot))
     return b
 
 

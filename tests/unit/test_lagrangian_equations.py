@@ -6,6 +6,7 @@ and every refusal names its field."""
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 import pytest
@@ -28,8 +29,9 @@ RK = {"method": "DOP853", "rtol": 1e-12, "atol": 1e-12}
 
 
 def reference_accelerations(spec: dict, eqs) -> sp.Matrix:
-    """q̈ of ``LagrangesMethod(L, q, nonhol_coneqs=...)`` in the symbols of ``eqs`` (the same L and
-    constraints, rebuilt from dynamicsymbols)."""
+    """(q̈, λ) of ``LagrangesMethod(L, q, nonhol_coneqs=...)`` in the symbols of ``eqs`` (the same L and
+    constraints, rebuilt from dynamicsymbols). Its multipliers have the convention used here:
+    d/dt ∂L/∂q̇ − ∂L/∂q = Aᵀλ."""
     t = dynamicsymbols._t
     qf = [dynamicsymbols(str(s)) for s in eqs.q]
     to_functions = {**{v: sp.diff(f, t) for v, f in zip(eqs.qdot, qf)}, **dict(zip(eqs.q, qf))}
@@ -38,7 +40,7 @@ def reference_accelerations(spec: dict, eqs) -> sp.Matrix:
     lm.form_lagranges_equations()
     n = len(qf)
     back = {**{sp.diff(f, t): v for v, f in zip(eqs.qdot, qf)}}
-    qddot = lm.rhs()[n:2 * n, :]
+    qddot = lm.rhs()[n:, :]  # (q̈, λ)
     return qddot.xreplace(back).xreplace(dict(zip(qf, eqs.q)))
 
 
@@ -61,7 +63,7 @@ def check_against_lagranges_method(spec: dict) -> None:
     eqs = derive(parse_system(spec))
     reference = reference_accelerations(spec, eqs)
     args = [*eqs.q, *eqs.qdot, *eqs.parameters]
-    ours = sp.lambdify(args, list(eqs.qddot), "numpy")
+    ours = sp.lambdify(args, [*eqs.qddot, *eqs.multipliers], "numpy")
     theirs = sp.lambdify(args, list(reference), "numpy")
     for state in random_states(eqs, 20, seed=7):
         x = [state[s] for s in args]
@@ -75,6 +77,21 @@ def test_sleigh_accelerations_agree_with_lagranges_method():
 
 def test_particle_accelerations_agree_with_lagranges_method():
     check_against_lagranges_method(PARTICLE)
+
+
+def test_a_derivation_past_its_budget_or_failing_is_a_derivation_error(monkeypatch):
+    from nonholonomic.lagrangian import DerivationError, equations
+
+    def slow(data):
+        time.sleep(0.5)
+        raise RuntimeError("never mind")
+
+    data = parse_system({"coordinates": ["x", "y"], "L": "(x_dot**2 + y_dot**2)/2 - x*y"})
+    monkeypatch.setattr(equations, "_derive", slow)
+    with pytest.raises(DerivationError, match="did not finish"):
+        derive(data, budget_s=0.05)
+    with pytest.raises(DerivationError, match="never mind"):
+        derive(data, budget_s=5.0)
 
 
 def numeric(eqs):
@@ -150,6 +167,15 @@ def test_unconstrained_and_time_dependent_lagrangians():
     x, eps, t = eqs.q[0], eqs.parameters[0], eqs.t
     assert sp.simplify(eqs.qddot[0] + x * (1 + eps * sp.cos(t))) == 0
     assert eqs.energy is None and eqs.multipliers == () and eqs.time_dependent
+
+
+def test_a_pivot_that_vanishes_by_an_identity_is_not_used():
+    """M = [[cosh²x − sinh²x − 1, 1], [1, 0]] = [[0, 1], [1, 0]]: ``cancel`` does not see the zero, the
+    numeric zero test does, and LU pivots on the other row; q̈ = −M⁻¹ ∂U/∂q = (−y, −x)."""
+    eqs = derive(parse_system({"coordinates": ["x", "y"],
+                               "L": "(cosh(x)**2 - sinh(x)**2 - 1)*x_dot**2/2 + x_dot*y_dot - x**2/2 - y**2/2"}))
+    x, y = eqs.q
+    assert [sp.simplify(e) for e in eqs.qddot] == [-y, -x]
 
 
 def with_(**changes) -> dict:
