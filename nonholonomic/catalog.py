@@ -91,4 +91,29 @@ def catalog() -> dict[str, Any]:
                    "lagrangian": "L(q, qdot), quadratic in the velocities",
                    "a1": "S = a1(q) q1dot + a2(q) q2dot + b(q)", "a2": "see a1", "b": "see a1",
                    "potential": "U(q) subtracted from L (optional)"},
-        "state": ["q", "qdot"], "checks": ["integrals", "measure", "bracket"], "example": gc.EXAMPLE_JOB}}
+        "state": ["q", "qdot"], "checks": ["integrals", "measure", "bracket"], "example": gc.EXAMPLE_JOB},
+        "lagrangian": lagrangian_entry()}
+
+
+def lagrangian_entry() -> dict[str, Any]:
+    """How to pose a Lagrangian system with constraints linear in the velocities (``GET /v1/systems/lagrangian``)."""
+    from nonholonomic.lagrangian.parse import RESERVED, VELOCITY_SUFFIX
+    from nonholonomic.systems import lagrangian as lag
+
+    return {
+        "kind": lag.KIND, "title": lag.TITLE, "equation": lag.EQUATION,
+        "fields": {"coordinates": f"names of the generalized coordinates q (1 to {lag.MAX_COORDINATES}); the velocity "
+                                  f"of x is x{VELOCITY_SUFFIX}",
+                   "L": "L(q, q_dot), a polynomial of degree 2 in the velocities with a regular mass matrix "
+                        "d2L/dq_dot2 (a potential is part of it: L = T - U); no explicit time t",
+                   "constraints": "each sum_j a_j(q) q_j_dot (meaning = 0): linear and homogeneous in the velocities, "
+                                  "independent, fewer than the coordinates",
+                   "parameters": "every constant of L and the constraints, with its value"},
+        "max_coordinates": lag.MAX_COORDINATES, "reserved_names": sorted(RESERVED),
+        "state": ["q", "q_dot"],
+        "integrals": ["energy: E = (q_dot, dL/dq_dot) - L",
+                      "constraint i: the i-th constraint, 0 along the motion"],
+        "measure": lag.NO_MEASURE,
+        "initial_state": f"q and q_dot, one component per coordinate; q_dot must satisfy every constraint to "
+                         f"{lag.CONSTRAINT_TOLERANCE:g} times its terms, or project_initial_state projects it",
+        "checks": ["integrals", "measure"], "example": lag.EXAMPLE_JOB}

@@ -150,17 +150,25 @@ def surface_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> 
     return [FieldProblem("initial_state.x", f"{why}; choose an x on a regular part of the surface, or another Phi")]
 
 
+#: Kinds written by the user as a Lagrangian: a field not finite at the initial state names ``initial_state.q``.
+_USER_LAGRANGIAN_KINDS = {"generalized_chaplygin": "the kinetic matrix d2L/dqdot2 is singular there, or L, S or U is",
+                          "lagrangian": "the mass matrix d2L/dq_dot2 (or A M^-1 A^T) is singular there, or L or a "
+                                        "constraint is"}
+
+
 def potential_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
     """A user's potential (``potential == "expression"``) whose gradient, so the field, is not finite at
     the initial state: refused before anything runs, naming ``system.potential.U``; for a user's
-    generalized Chaplygin system, any field not finite there (det G = 0 ...), naming ``initial_state.q``."""
-    if system.kind == "generalized_chaplygin":
+    generalized Chaplygin or Lagrangian system, any field not finite there (det M = 0 ...), naming
+    ``initial_state.q``."""
+    user = system.kind in _USER_LAGRANGIAN_KINDS
+    if user:
         field = "initial_state.q"
     elif system.potential != "expression":
         return []
     else:
         field = "system.potential.U"
-    what = "; ".join(system.notes[:2]) if system.kind == "generalized_chaplygin" else system.potential_formula
+    what = "; ".join(system.notes[:2]) if user else system.potential_formula
     try:
         with np.errstate(all="ignore"):
             f = numeric(system).rhs_single(np.asarray(y, dtype=float), p)
@@ -168,8 +176,7 @@ def potential_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -
         return [FieldProblem(field, f"{what}: cannot be evaluated at the initial state ({type(exc).__name__}: {exc})")]
     if np.all(np.isfinite(f)):
         return []
-    why = ("the field is not finite at the initial state: the kinetic matrix d2L/dqdot2 is singular there, or L, "
-           "S or U is" if system.kind == "generalized_chaplygin" else
+    why = (f"the field is not finite at the initial state: {_USER_LAGRANGIAN_KINDS[system.kind]}" if user else
            "its gradient is not finite at the initial state (a singularity there); choose another U or state")
     return [FieldProblem(field, f"{what}: {why}")]
 

@@ -139,7 +139,8 @@ class SpectrumResult(BaseModel):
     convergence_t: list[float] = Field(description="times of the kept QR steps after the transient [s]")
     convergence: list[list[float]] = Field(description="running estimates, one row per convergence_t")
     sum: float = Field(description="sum of the whole spectrum (= time average of div f, Liouville)")
-    sum_expected: float | None = Field(description="what the invariant measure predicts for T -> infinity (0)")
+    sum_expected: float | None = Field(description="what the invariant measure predicts for T -> infinity (0); "
+                                                    "null when the system claims no measure")
     sum_reason: str
     divergence_average: float | None = Field(description="(1/T) int div f dt by quadrature")
     measure_average: float | None = Field(description="-[ln rho]/T: the claimed measure's prediction at this T")

@@ -151,8 +151,27 @@ class CatalogGeneralizedChaplygin(_Strict):
     example: dict[str, Any] = Field(description="a runnable job: Veselova's system in Euler angles")
 
 
+class CatalogLagrangian(_Strict):
+    """A Lagrangian system of one's own with constraints linear in the velocities as a job's ``system``."""
+
+    kind: str
+    title: str
+    equation: str
+    fields: dict[str, str] = Field(description="what each field of the system block holds")
+    max_coordinates: int
+    reserved_names: list[str] = Field(description="names a coordinate or parameter may not take")
+    state: list[str] = Field(description="the initial state's vectors (one component per coordinate each)")
+    integrals: list[str] = Field(description="what a job claims along the motion")
+    measure: str = Field(description="the invariant measure claimed (none yet)")
+    initial_state: str = Field(description="what the initial state must satisfy")
+    checks: list[str]
+    example: dict[str, Any] = Field(description="a runnable job: Chaplygin's sleigh")
+
+
 class Catalog(_Strict):
-    """``GET /v1/systems``: one entry per kind, and the generalized Chaplygin system of one's own."""
+    """``GET /v1/systems``: one entry per kind, the generalized Chaplygin system and the Lagrangian system of
+    one's own."""
 
     systems: list[SystemDescription]
     generalized_chaplygin: CatalogGeneralizedChaplygin
+    lagrangian: CatalogLagrangian

@@ -76,7 +76,7 @@ class JobRequest(BaseModel):
     initial_state: dict[str, StateVec] = Field(
         description="state vectors by name (the catalog lists them), e.g. {'M': [..], 'gamma': [..]}; "
                     "for the ball 'omega' may replace 'M'; for a generalized_chaplygin system 'q' and 'qdot', "
-                    "two components each")
+                    "two components each; for a lagrangian system 'q' and 'q_dot', one per coordinate")
     t_final: FiniteFloat = Field(gt=0, description="end of the integration interval [0, t_final], in s")
     samples: int = Field(201, ge=2, description="number of equally spaced sample times, both ends included")
     checks: list[Literal["integrals", "measure", "bracket", "euler_angles", "isomorphisms"]] = Field(

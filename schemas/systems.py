@@ -15,9 +15,13 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, Valid
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
 from nonholonomic.expressions import ExpressionError, check_expression, declare_symbols
 from nonholonomic.initial_state import FieldProblem
+from nonholonomic.lagrangian import DerivationError as LagrangianDerivationError
+from nonholonomic.lagrangian import parse as lagrangian
+from nonholonomic.lagrangian.parse import MAX_COORDINATES
 from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, Potential
 from nonholonomic.systems import POTENTIAL_NAMES, SURFACE_KINDS, SYSTEMS, get_system, own_names, user_potential
 from nonholonomic.systems import generalized_chaplygin as gc
+from nonholonomic.systems import lagrangian as lag
 from nonholonomic.systems.ball_on_surface import SURFACE_VARIABLES, Surface, surface
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE as GENERALIZED_CHAPLYGIN_EXAMPLE
 
@@ -34,8 +38,9 @@ def no_step(fields: Sequence[str]) -> None:
 MAX_STATE_MAGNITUDE = 1e12
 StateFloat = Annotated[float, Strict(), Field(allow_inf_nan=False, ge=-MAX_STATE_MAGNITUDE, le=MAX_STATE_MAGNITUDE)]
 Vec3 = Annotated[list[StateFloat], Field(min_length=3, max_length=3)]
-#: A state vector of an initial state: 3 components, 2 for a generalized Chaplygin system's q and qdot.
-StateVec = Annotated[list[StateFloat], Field(min_length=2, max_length=3)]
+#: A state vector of an initial state: 3 components, 2 for a generalized Chaplygin system's q and qdot, 1 to 8
+#: for a lagrangian system's q and q_dot (each kind checks its own lengths).
+StateVec = Annotated[list[StateFloat], Field(min_length=1, max_length=MAX_COORDINATES)]
 Mat3 = Annotated[list[Vec3], Field(min_length=3, max_length=3)]
 
 
@@ -406,6 +411,98 @@ class GeneralizedChaplyginSpec(SystemSpec):
         return self.validation_definition(), []
 
 
-#: What POST /v1/jobs takes as ``system``: every kind of the catalog and a generalized Chaplygin system.
-JobSystemSpec = Annotated[Union[(*SYSTEM_MODELS.values(), GeneralizedChaplyginSpec)],  # type: ignore[valid-type]
-                          Field(discriminator="kind")]
+# --------------------------------------------------------------------------------------------------
+# a Lagrangian system with constraints linear in the velocities (jobs only)
+
+
+Name = Annotated[str, Field(min_length=1, max_length=32)]
+
+
+class LagrangianSpec(SystemSpec):
+    """A system given by its Lagrangian L(q, q_dot) in coordinates of one's own and constraints linear and
+    homogeneous in the velocities (each written as sum_j a_j(q) q_j_dot, meaning = 0); the velocity of ``x``
+    is ``x_dot``. The Lagrange-d'Alembert equations are derived with the multipliers eliminated."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [lag.EXAMPLE]})
+
+    kind: Literal["lagrangian"]
+    coordinates: list[Name] = Field(
+        min_length=1, max_length=MAX_COORDINATES,
+        description=f"names of the generalized coordinates q (1 to {MAX_COORDINATES}); their velocities are "
+                    "'<name>_dot'")
+    parameters: dict[str, ParameterFloat] = Field(
+        default_factory=dict, max_length=MAX_EXPRESSION_PARAMETERS,
+        description="every constant of L and the constraints, by name, with its value")
+    L: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
+                   description="the Lagrangian L(q, q_dot), a polynomial of degree 2 in the velocities with a regular "
+                               "mass matrix d2L/dq_dot2 (a potential is part of it: L = T - U)")
+    constraints: list[Annotated[str, Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH)]] = Field(
+        default_factory=list, max_length=MAX_COORDINATES - 1,
+        description="each sum_j a_j(q) q_j_dot, meaning = 0 (linear and homogeneous in the velocities); fewer "
+                    "than the coordinates")
+
+    @field_validator("coordinates", "parameters")
+    @classmethod
+    def _names(cls, value: Any, info: ValidationInfo) -> Any:
+        if info.field_name == "parameters" and "coordinates" not in info.data:
+            return value  # the coordinates are refused already
+        coordinates = tuple(value if info.field_name == "coordinates" else info.data["coordinates"])
+        try:
+            lagrangian.declared(coordinates, tuple(value) if info.field_name == "parameters" else ())
+        except lagrangian.DataError as exc:
+            if exc.field == info.field_name:
+                raise ValueError(exc.reason) from None
+        return value
+
+    @field_validator("L", "constraints")
+    @classmethod
+    def _parsed(cls, value: Any, info: ValidationInfo) -> Any:
+        """The cheap checks only (syntax, whitelist, names); sympy reads the fields within the validation budget."""
+        if any(k not in info.data for k in ("coordinates", "parameters")):
+            return value  # the names are refused already
+        names = ["t", *info.data["coordinates"], *(lagrangian.velocity_name(c) for c in info.data["coordinates"]),
+                 *info.data["parameters"]]
+        for i, text in enumerate([value] if info.field_name == "L" else value):
+            try:
+                check_expression(text, names, max_length=MAX_EXPRESSION_LENGTH)
+            except ExpressionError as exc:
+                raise ValueError(str(exc) if info.field_name == "L" else f"constraints[{i}]: {exc}") from None
+        return value
+
+    def parameter_values(self) -> dict[str, Any]:
+        return dict(self.parameters)
+
+    def data(self) -> lagrangian.LagrangianData:
+        """The core's parsed and checked system (raises :class:`nonholonomic.lagrangian.DataError`)."""
+        return lagrangian.lagrangian_data(tuple(self.coordinates), self.L, tuple(self.constraints),
+                                          tuple(self.parameters.items()))
+
+    def definition(self) -> MechanicalSystem:
+        """The system with its derived equations of motion (symbolic work, cached)."""
+        return lag.define(self.data())
+
+    def validation_definition(self) -> MechanicalSystem:
+        """The same as :meth:`definition`: the equations are what a request is checked against."""
+        return self.definition()
+
+    def expressions(self) -> list[tuple[str, str]]:
+        return [("system.L", self.L), *((f"system.constraints[{i}]", c) for i, c in enumerate(self.constraints))]
+
+    def checked_definition(self, step: Step = no_step) -> tuple[MechanicalSystem | None, list[FieldProblem]]:
+        fields = [field for field, _ in self.expressions()]
+        step(fields)
+        try:
+            self.data()
+            step(fields)  # the derivation reads them all
+            return self.validation_definition(), []
+        except lagrangian.DataError as exc:
+            return None, [FieldProblem(f"system.{exc.field}", exc.reason)]
+        except LagrangianDerivationError as exc:
+            return None, [FieldProblem("system.L", f"{exc}; write L or the constraints simpler, or with fewer "
+                                                   "coordinates")]
+
+
+#: What POST /v1/jobs takes as ``system``: every kind of the catalog, a generalized Chaplygin system and a
+#: Lagrangian system of one's own.
+JobSystemSpec = Annotated[Union[(*SYSTEM_MODELS.values(), GeneralizedChaplyginSpec,  # type: ignore[valid-type]
+                                 LagrangianSpec)], Field(discriminator="kind")]

@@ -232,12 +232,13 @@ def _definition(system_info: Mapping[str, Any], request: Mapping[str, Any] | Non
     constraints, which a user's potential does not change; a user's surface, from the ``request``, does)."""
     potential = system_info.get("potential", "zero")
     surface = None
-    if system_info["kind"] == "generalized_chaplygin":  # the user's system lives in the request
-        from schemas.systems import GeneralizedChaplyginSpec
+    if system_info["kind"] in ("generalized_chaplygin", "lagrangian"):  # the user's system lives in the request
+        from schemas.systems import GeneralizedChaplyginSpec, LagrangianSpec
 
         if request is None or "system" not in request:
             raise PlotUnavailable("the system of this result is in its request, which is not given")
-        return GeneralizedChaplyginSpec.model_validate(request["system"]).validation_definition()
+        spec = GeneralizedChaplyginSpec if system_info["kind"] == "generalized_chaplygin" else LagrangianSpec
+        return spec.model_validate(request["system"]).validation_definition()
     if system_info["kind"] in SURFACE_KINDS:
         from schemas.systems import SurfaceSpec
 
@@ -516,7 +517,8 @@ def _lyapunov_figure(result: Mapping[str, Any], request: Mapping[str, Any] | Non
     ax.set_title(verdict, color="C3" if loose else "0.3")
     fig.suptitle(_headline(info, f"Lyapunov exponents, finite-time estimates at {finite_time(spectrum, result.get('t_final'))}"
                                  f" (QR every {spectrum.get('interval', 0):g} s); sum {spectrum.get('sum', float('nan')):.2e} "
-                                 f"1/s, expected {spectrum.get('sum_expected', 0):g}"))
+                                 + (f"1/s, expected {spectrum['sum_expected']:g}" if spectrum.get("sum_expected")
+                                    is not None else "1/s (no measure claimed: no expected sum)")))
     return fig
 
 

@@ -34,8 +34,9 @@ def systems_table(catalog: Mapping[str, Any]) -> str:
     """
     rows = [("KIND", "STATE", "TITLE")]
     entries = list(catalog.get("systems", []))
-    if isinstance(catalog.get("generalized_chaplygin"), Mapping):  # a system written by the user, its own shape
-        entries.append(catalog["generalized_chaplygin"])
+    for own in ("generalized_chaplygin", "lagrangian"):  # systems written by the user, each its own shape
+        if isinstance(catalog.get(own), Mapping):
+            entries.append(catalog[own])
     for s in entries:
         state = [str(v.get("name")) if isinstance(v, Mapping) else str(v) for v in s.get("state", [])]
         rows.append((str(s.get("kind")), ", ".join(state), str(s.get("title", ""))))

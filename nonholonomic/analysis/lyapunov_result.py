@@ -46,8 +46,8 @@ class Spectrum:
     convergence : shape ``(len(convergence_t), count)``: the running estimates
         ``Σ_{t_k ≤ t} log|R_ii| / (t − transient)``.
     sum : Σ of the whole spectrum (= (1/T)∫ div f dt by Liouville).
-    sum_expected : 0 (the limit T → ∞ the invariant measure predicts); ``None`` never for the
-        systems here (each claims a measure).
+    sum_expected : 0 (the limit T → ∞ the invariant measure predicts); ``None`` when the system claims
+        no measure (a user's system without one found: then the sum need not vanish).
     sum_reason : the argument, with the measure's formula and equation.
     divergence_average : (1/T) ∫ div f dt along the orbit by quadrature (an integrated variable,
         independent of R and of the claimed measure).
@@ -167,13 +167,22 @@ def _finish(system: MechanicalSystem, p: np.ndarray, acc: _Accumulator, end_stat
         consistent: bool | None = abs(total - measure_average) <= MEASURE_TOLERANCE * scale
     else:
         measure_average, consistent = None, None
-    sum_reason = (f"invariant measure rho d(state), {measure.formula} (eq. {measure.equation}): "
-                  "div(rho f) = 0 => div f = -d/dt ln rho along the orbit => the sum of the full spectrum, "
-                  "(1/T) int div f dt (Liouville: d/dt ln det Phi = div f), equals -[ln rho]_0^T / T -> 0 "
-                  "(rho positive and bounded on a bounded orbit)")
+    if measure.density is None:  # nothing claimed: the sum is what the orbit gives, not a prediction
+        sum_expected: float | None = None
+        sum_reason = (f"no invariant measure is claimed ({measure.formula}): the sum of the full spectrum, "
+                      "(1/T) int div f dt (Liouville: d/dt ln det Phi = div f), need not vanish; a flow without "
+                      "an invariant measure can contract phase volume (e.g. Chaplygin's sleigh)")
+    else:
+        sum_expected = 0.0
+        sum_reason = (f"invariant measure rho d(state), {measure.formula} (eq. {measure.equation}): "
+                      "div(rho f) = 0 => div f = -d/dt ln rho along the orbit => the sum of the full spectrum, "
+                      "(1/T) int div f dt (Liouville: d/dt ln det Phi = div f), equals -[ln rho]_0^T / T -> 0 "
+                      "(rho positive and bounded on a bounded orbit)")
 
     warnings: list[str] = []
-    if consistent is False:
+    if measure.density is None:
+        pass
+    elif consistent is False:
         warnings.append(f"the sum of the spectrum {total:.6g} (quadrature of div f: {divergence_average:.6g}) "
                         f"contradicts the claimed invariant measure {measure.formula} "
                         f"(eq. {measure.equation}), which predicts -[ln rho]/T = {measure_average:.6g}: "
@@ -199,7 +208,7 @@ def _finish(system: MechanicalSystem, p: np.ndarray, acc: _Accumulator, end_stat
         warnings.append("non-finite exponents")
     return Spectrum(
         exponents=values[:count].copy(), all_exponents=values, convergence_t=np.asarray(acc.rows_t),
-        convergence=rows[:, :count].copy(), sum=total, sum_expected=0.0, sum_reason=sum_reason,
+        convergence=rows[:, :count].copy(), sum=total, sum_expected=sum_expected, sum_reason=sum_reason,
         divergence_average=float(divergence_average), measure_average=measure_average,
         measure_consistent=consistent, expected_zero=zeros, zero_count=zero_count, zero_indices=zero_indices,
         zero_observed=values[zero_indices], moved_last_20pct=moved[:count].copy(),

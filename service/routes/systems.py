@@ -9,7 +9,8 @@ from fastapi import APIRouter
 from nonholonomic.catalog import catalog, describe
 from nonholonomic.systems import SYSTEMS
 from nonholonomic.systems.generalized_chaplygin import KIND as GENERALIZED_CHAPLYGIN
-from schemas.catalog import Catalog, CatalogGeneralizedChaplygin, SystemDescription
+from nonholonomic.systems.lagrangian import KIND as LAGRANGIAN
+from schemas.catalog import Catalog, CatalogGeneralizedChaplygin, CatalogLagrangian, SystemDescription
 from schemas.problems import NOT_FOUND
 from service.errors import ProblemError, did_you_mean, problem_responses
 from service.openapi import operation_id
@@ -23,16 +24,20 @@ def list_systems() -> dict[str, Any]:
     return catalog()
 
 
-@router.get("/{kind}", operation_id="systems-get", response_model=SystemDescription | CatalogGeneralizedChaplygin,
+@router.get("/{kind}", operation_id="systems-get",
+            # CatalogLagrangian before CatalogGeneralizedChaplygin: a generated client tries the union in order, and the
+            # Lagrangian entry holds every field the other requires (not the other way round)
+            response_model=SystemDescription | CatalogLagrangian | CatalogGeneralizedChaplygin,
             response_model_exclude_unset=True, responses=problem_responses({404: "unknown system kind"}),
-            summary="One kind of the catalog (generalized_chaplygin: how to pose a system of one's own)")
+            summary="One kind of the catalog (generalized_chaplygin, lagrangian: how to pose a system of one's own)")
 def get_system(kind: str) -> dict[str, Any]:
-    """A kind of :data:`SYSTEMS` as a ``SystemDescription``; ``generalized_chaplygin`` (a system the request
-    writes itself) as the catalog's ``generalized_chaplygin`` entry, a ``CatalogGeneralizedChaplygin``."""
+    """A kind of :data:`SYSTEMS` as a ``SystemDescription``; ``generalized_chaplygin`` and ``lagrangian`` (systems
+    the request writes itself) as the catalog's entries of those names, a ``CatalogGeneralizedChaplygin`` and a
+    ``CatalogLagrangian``."""
     if kind in SYSTEMS:
         return describe(kind)
-    if kind == GENERALIZED_CHAPLYGIN:
-        return catalog()["generalized_chaplygin"]
-    known = [*SYSTEMS, GENERALIZED_CHAPLYGIN]
+    if kind in (GENERALIZED_CHAPLYGIN, LAGRANGIAN):
+        return catalog()[kind]  # type: ignore[no-any-return]
+    known = [*SYSTEMS, GENERALIZED_CHAPLYGIN, LAGRANGIAN]
     raise ProblemError(404, "Unknown system kind",
                        f"no system kind {kind!r}{did_you_mean(kind, known)}; known: {sorted(known)}", NOT_FOUND)

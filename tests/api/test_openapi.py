@@ -224,9 +224,11 @@ def test_typed_answers(spec):
     for (method, path), name in refs.items():
         schema = spec["paths"][path][method.lower()]["responses"]["200"]["content"]["application/json"]["schema"]
         assert schema == {"$ref": f"#/components/schemas/{name}"}, (method, path)
-    # a kind of the catalog, or the generalized Chaplygin system of one's own (GET /v1/systems/generalized_chaplygin)
+    # a kind of the catalog, or a generalized Chaplygin or Lagrangian system of one's own
+    # (GET /v1/systems/generalized_chaplygin, /v1/systems/lagrangian)
     kind = spec["paths"]["/v1/systems/{kind}"]["get"]["responses"]["200"]["content"]["application/json"]["schema"]
     assert kind["anyOf"] == [{"$ref": "#/components/schemas/SystemDescription"},
+                             {"$ref": "#/components/schemas/CatalogLagrangian"},
                              {"$ref": "#/components/schemas/CatalogGeneralizedChaplygin"}]
 
 
@@ -439,5 +441,8 @@ def test_generated_client_downloads_every_file_as_its_exact_bytes(generated, cli
     assert isinstance(entry, model("catalog_generalized_chaplygin", "CatalogGeneralizedChaplygin"))
     assert entry.kind == "generalized_chaplygin" and entry.to_dict() == client.get(
         "/v1/systems/generalized_chaplygin").json()
+    entry = api_module("systems", "systems_get").sync("lagrangian", client=api)
+    assert isinstance(entry, model("catalog_lagrangian", "CatalogLagrangian"))
+    assert entry.kind == "lagrangian" and entry.to_dict() == client.get("/v1/systems/lagrangian").json()
     ball = api_module("systems", "systems_get").sync("chaplygin_ball", client=api)
     assert isinstance(ball, model("system_description", "SystemDescription"))
