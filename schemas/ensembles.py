@@ -22,7 +22,7 @@ from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems, t_final_within_limit
 from schemas.results import MemberResultModel
 from schemas.settings import get_settings
-from schemas.systems import AnySystemSpec, FiniteFloat, Step, Vec3, no_step
+from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step
 
 ENSEMBLE_JOB = "ensemble"
 _PATH = re.compile(r"^(?:potential\.)?([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
@@ -46,7 +46,7 @@ class SweepMembers(BaseModel):
 
     parameter: str = Field(description="parameter path: 'D', 'inertia[1]', 'potential.a[2]'")
     values: list[FiniteFloat] = Field(min_length=1)
-    initial_state: dict[str, Vec3]
+    initial_state: dict[str, StateVec]
 
 
 class MembersSpec(BaseModel):
@@ -54,7 +54,7 @@ class MembersSpec(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    initial_states: list[dict[str, Vec3]] | None = Field(None, min_length=1)
+    initial_states: list[dict[str, StateVec]] | None = Field(None, min_length=1)
     sample: SampleMembers | None = None
     sweep: SweepMembers | None = None
 
@@ -84,7 +84,7 @@ class EnsembleRequest(BaseModel):
         "poincare": {"surface": "gamma3", "coordinates": ["M1", "M2"]},
         "lyapunov": {"count": 1}}]})
 
-    system: AnySystemSpec
+    system: JobSystemSpec
     members: MembersSpec
     t_final: FiniteFloat = Field(gt=0, description="end of each member's integration [s]")
     samples: int = Field(2, ge=2, description="sample times per member (both ends included)")

@@ -324,8 +324,14 @@ AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discrimina
 
 
 def definition_of(system_json: dict[str, Any]) -> MechanicalSystem:
-    """The core's definition of a stored (already validated) request's ``system`` block."""
-    return SYSTEM_MODELS[system_json["kind"]].model_validate(system_json).definition()
+    """The core's definition of a stored (already validated) request's ``system`` block: its names,
+    state, units and field (a user-written system's without Theorem 1's reduction, which only its job
+    or ensemble needs)."""
+    if system_json["kind"] in SYSTEM_MODELS:
+        return SYSTEM_MODELS[system_json["kind"]].model_validate(system_json).definition()
+    from pydantic import TypeAdapter
+
+    return TypeAdapter(JobSystemSpec).validate_python(system_json).validation_definition()
 
 
 # --------------------------------------------------------------------------------------------------

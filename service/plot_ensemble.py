@@ -27,16 +27,13 @@ from service.plots import (
 
 def _ensemble_system(view: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
     """A ``system`` block (kind, title, equation) and the units of an ensemble, from its request."""
-    from pydantic import TypeAdapter
-
     from schemas.results import system_units
-    from schemas.systems import AnySystemSpec
+    from schemas.systems import definition_of
 
     try:
-        spec = TypeAdapter(AnySystemSpec).validate_python(view["request"]["system"])
+        system = definition_of(dict(view["request"]["system"]))
     except (KeyError, TypeError, ValueError) as exc:
         raise PlotUnavailable(f"the ensemble's request does not rebuild a system: {exc}") from None
-    system = spec.definition()
     return {"kind": system.kind, "title": system.title, "equation": system.equation}, system_units(system)
 
 

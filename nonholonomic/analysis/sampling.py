@@ -320,8 +320,10 @@ def describe_sampling(system: MechanicalSystem) -> str:
     return RECIPES[system.kind].description(fixable(system))
 
 
-#: Why a kind without a recipe (a ball on the user's surface: its extent is unknown) samples no level.
-_NO_RECIPE = "no states drawn on a level set (the surface is the user's own): give the members' initial states"
+#: Why a kind without a recipe samples no level: the system (a surface, a Lagrangian, a generalized
+#: Chaplygin system) is the user's own, so the extent of its level sets is unknown.
+_NO_RECIPE = ("no states drawn on a level set (the system is the user's own: the extent of its level sets is "
+              "unknown): give the members' initial states or a sweep")
 
 
 def _check_request(system: MechanicalSystem, parameters: np.ndarray, level: Mapping[str, float],
