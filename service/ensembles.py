@@ -15,7 +15,7 @@ import numpy as np
 from nonholonomic.analysis.ensemble import summarize
 from schemas.results import system_units
 from schemas.systems import definition_of
-from service.exports import section_columns
+from service.exports import point_array, section_columns, vector_widths
 from store.ensembles import EnsembleStore
 
 
@@ -79,8 +79,9 @@ def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
     each column and its unit (streamed a member at a time)."""
     header_written = False
     units = request_units(record["request"])
+    widths = vector_widths(record["request"]["system"])
     for index, section in section_members(store, ensemble_id, record):
-        cols = section_columns(section, units)
+        cols = section_columns(section, units, widths)
         buffer = io.StringIO()
         writer = csv.writer(buffer)
         if not header_written:
@@ -95,16 +96,17 @@ def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
 
 
 def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> bytes:
-    """Every member's crossings as NPZ arrays (``member``, ``t``, ``tau``, each point vector ``(n, 3)``),
-    with the request and the units as JSON in ``request_json`` and ``units_json``."""
+    """Every member's crossings as NPZ arrays (``member``, ``t``, ``tau``, each point vector ``(n, k)``, k its
+    components), with the request and the units as JSON in ``request_json`` and ``units_json``."""
     parts: dict[str, list[np.ndarray]] = {"member": []}
+    widths = vector_widths(record["request"]["system"])
     for index, section in section_members(store, ensemble_id, record):
         parts["member"].append(np.full(section["count"], index, dtype=np.int64))
         for key in ("t", "tau"):
             if section.get(key) is not None:
                 parts.setdefault(key, []).append(np.asarray(section[key], dtype=float))
         for name, values in section["points"].items():
-            parts.setdefault(name, []).append(np.asarray(values, dtype=float).reshape(-1, 3))
+            parts.setdefault(name, []).append(point_array(values, section["count"], widths[name]))
     arrays = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
     buffer = io.BytesIO()
     np.savez(buffer, **arrays, request_json=np.array(json.dumps(record["request"])),

@@ -37,14 +37,31 @@ def _vectors(samples: Mapping[str, Any]) -> list[str]:
     return [k for k in samples if k not in ("t", "tau")]
 
 
-def columns(times: Mapping[str, Any], vectors: Mapping[str, Any], units: Mapping[str, str]) -> list[Column]:
+def vector_widths(system_json: Mapping[str, Any]) -> dict[str, int]:
+    """Components of every state and derived vector of a request's system: the shape of a section's
+    points when there are no rows to read it from (2 for a generalized Chaplygin system's q, n for a
+    Lagrangian system's)."""
+    from schemas.systems import definition_of
+
+    system = definition_of(dict(system_json))
+    return {**{v.name: len(v.symbols) for v in system.state}, **{d.name: len(d.expression) for d in system.derived}}
+
+
+def point_array(values: Any, count: int, width: int) -> np.ndarray:
+    """A section's vector as a ``(count, width)`` float64 array (``width`` from :func:`vector_widths`)."""
+    return np.asarray(values, dtype=np.float64).reshape(count, width)
+
+
+def columns(times: Mapping[str, Any], vectors: Mapping[str, Any], units: Mapping[str, str],
+            widths: Mapping[str, int] | None = None) -> list[Column]:
     """(header ``name [unit]``, key, component or None) for t, τ (when ``times`` has one) and every
-    component of every vector (``M1``, ``M2`` ...: the vector's name and the component's number from 1)."""
+    component of every vector (``M1``, ``M2`` ...: the vector's name and the component's number from 1);
+    a vector without rows has ``widths[name]`` components."""
     cols: list[Column] = [(f"t [{units.get('t', 's')}]", "t", None)]
     if times.get("tau") is not None:
         cols.append((f"tau [{units.get('tau', '')}]", "tau", None))
     for name, values in vectors.items():
-        width = len(values[0]) if len(values) else 3
+        width = len(values[0]) if len(values) else (widths or {}).get(name, 3)
         cols += [(f"{name}{k + 1} [{units.get(name, '')}]", name, k) for k in range(width)]
     return cols
 
@@ -55,9 +72,10 @@ def trajectory_columns(result: dict[str, Any]) -> list[Column]:
     return columns(trajectory, {name: trajectory[name] for name in _vectors(trajectory)}, result["system"]["units"])
 
 
-def section_columns(section: dict[str, Any], units: Mapping[str, str]) -> list[Column]:
+def section_columns(section: dict[str, Any], units: Mapping[str, str],
+                    widths: Mapping[str, int] | None = None) -> list[Column]:
     """The same for a section (``poincare`` block): t, τ, every point vector's components."""
-    return columns(section, section["points"], units)
+    return columns(section, section["points"], units, widths)
 
 
 def _csv_rows(cols: Sequence[Column], times: Mapping[str, Any], vectors: Mapping[str, Any], count: int,
@@ -87,10 +105,11 @@ def trajectory_csv(result: dict[str, Any]) -> Iterator[str]:
     return _streamed([c[0] for c in cols], _csv_rows(cols, trajectory, trajectory, len(trajectory["t"])))
 
 
-def section_csv(section: dict[str, Any], units: Mapping[str, str]) -> Iterator[str]:
+def section_csv(section: dict[str, Any], units: Mapping[str, str],
+                widths: Mapping[str, int] | None = None) -> Iterator[str]:
     """A job's crossings as CSV: one row per crossing, t, τ and every state and derived component, a
-    header naming each column and its unit."""
-    cols = section_columns(section, units)
+    header naming each column and its unit (``widths``: :func:`vector_widths`, for a section without rows)."""
+    cols = section_columns(section, units, widths)
     return _streamed([c[0] for c in cols], _csv_rows(cols, section, section["points"], len(section["t"])))
 
 
@@ -120,8 +139,9 @@ def section_npz(result: dict[str, Any], request: dict[str, Any]) -> bytes:
     arrays = {"t": np.asarray(section["t"], dtype=float)}
     if section.get("tau") is not None:
         arrays["tau"] = np.asarray(section["tau"], dtype=float)
-    arrays.update({name: np.asarray(values, dtype=float).reshape(count, -1) if count else np.zeros((0, 3))
-                   for name, values in section["points"].items()})
+    widths = {name: len(values[0]) for name, values in section["points"].items() if count} or \
+        vector_widths(request["system"])
+    arrays.update({name: point_array(values, count, widths[name]) for name, values in section["points"].items()})
     arrays["coordinates"] = np.asarray(section["coordinates"], dtype=float).reshape(count, 2)
     return _npz(arrays, units=result["system"]["units"], request=request, versions=result["integration"]["versions"],
                 section=section_facts(section))

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from service.exports import section_facts
+from service.exports import point_array, section_facts, vector_widths
 
 CONVENTIONS = "CF-1.10"
 REFERENCES = ('A. V. Borisov, I. S. Mamaev, "Hamiltonization of nonholonomic systems" (the equations, integrals, '
@@ -59,11 +59,12 @@ def _describe(system_json: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _variables(vectors: Mapping[str, Any], count: int, dim: str, units: Mapping[str, str],
-               labels: Mapping[str, Any]) -> dict[str, Any]:
-    """One ``(dim,)`` float64 variable per component: ``M1`` ... with units and long_name."""
+               labels: Mapping[str, Any], widths: Mapping[str, int] | None = None) -> dict[str, Any]:
+    """One ``(dim,)`` float64 variable per component: ``M1`` ... with units and long_name (``widths``:
+    the components of a vector without rows)."""
     out: dict[str, Any] = {}
     for name, values in vectors.items():
-        array = np.asarray(values, dtype=np.float64).reshape(count, -1) if count else np.zeros((0, 3))
+        array = np.asarray(values, dtype=np.float64).reshape(count, -1 if count else (widths or {}).get(name, 3))
         own = labels.get("components", {}).get(name, [])
         for k in range(array.shape[1]):
             called = f" {own[k]}" if k < len(own) else ""
@@ -178,7 +179,8 @@ def section_netcdf(job_id: str, created_at: str, result: Mapping[str, Any], requ
     labels = _describe(request["system"])
     attrs = _job_attrs(f"{result['system'].get('title', '')}: Poincare section of job {job_id}", job_id, created_at,
                        result, request, f"GET /v1/jobs/{job_id}/section?format=netcdf")
-    return _write(_variables(section["points"], len(section["t"]), "crossing", units, labels),
+    widths = None if section["t"] else vector_widths(request["system"])
+    return _write(_variables(section["points"], len(section["t"]), "crossing", units, labels, widths),
                   _times(section, "crossing", units, labels), {**attrs, **_section_attrs(section)})
 
 
@@ -192,6 +194,7 @@ def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary
     parts: dict[str, list[np.ndarray]] = {"member": [], "t": []}
     has_tau = True
     first: dict[str, Any] | None = None
+    widths = vector_widths(record["request"]["system"])
     for index, section in members:
         count = len(section["t"])
         first = first or section
@@ -202,8 +205,7 @@ def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary
         else:
             parts.setdefault("tau", []).append(np.asarray(section["tau"], dtype=np.float64))
         for name, values in section["points"].items():
-            parts.setdefault(name, []).append(np.asarray(values, dtype=np.float64).reshape(count, -1) if count
-                                              else np.zeros((0, 3)))
+            parts.setdefault(name, []).append(point_array(values, count, widths[name]))
     joined = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
     request = record["request"]
     labels = _describe(request["system"])
@@ -226,4 +228,4 @@ def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary
         "members_with_crossings": np.int64(sum(1 for m in parts["member"] if len(m))),
         **({} if first is None else {k: v for k, v in _section_attrs(first).items() if k != "section"}),
     }
-    return _write(_variables(vectors, count, "crossing", units, labels), coords, attrs)
+    return _write(_variables(vectors, count, "crossing", units, labels, widths), coords, attrs)

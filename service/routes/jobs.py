@@ -32,6 +32,7 @@ from service.exports import (
     json_download,
     section_csv,
     section_npz,
+    vector_widths,
     trajectory_csv,
     trajectory_npz,
 )
@@ -156,7 +157,8 @@ def get_section(job_id: str, request: Request, format: ExportFormat = _FORMAT) -
     filename = f"job-{job_id}-section.{SUFFIXES[format]}"
     units = result["system"]["units"]
     if format == "csv":
-        return download(request, section_csv(result["poincare"], units), MEDIA_TYPES[format], filename)
+        widths = None if result["poincare"]["t"] else vector_widths(record.request["system"])
+        return download(request, section_csv(result["poincare"], units, widths), MEDIA_TYPES[format], filename)
     if format == "npz":
         return download(request, section_npz(result, record.request), MEDIA_TYPES[format], filename)
     if format == "netcdf":

@@ -62,3 +62,36 @@ def test_wrong_widths_and_unsampled_levels_are_named(client):
     assert any(f.startswith("members.initial_states[0]") for f in fields) and "at least 3 items" not in r.text
     r = client.post("/v1/ensembles", json={**body, "members": {"sample": {"count": 4, "level": {"energy": 1.0}}}})
     assert r.status_code == 422 and r.json()["errors"][0]["field"].startswith("members.sample"), r.text
+
+
+def test_sections_keep_each_vectors_own_width_with_rows_and_without(client):
+    """A generalized Chaplygin system's q has 2 components: its ensemble's NPZ and NetCDF hold (count, 2)
+    arrays equal to the members' JSON (before, the NPZ was reshaped to (−1, 3)); a section without a
+    crossing keeps the widths too (no phantom q3)."""
+    import io
+
+    import xarray as xr
+
+    section = {"surface": "phi", "value": 0.0, "direction": "both", "coordinates": ["theta", "phi"]}
+    view, members = _ensemble(client, {"system": VESELOVA_JOB["system"], "t_final": 30.0, "poincare": section,
+                                       "members": {"initial_states": [VESELOVA_JOB["initial_state"]] * 2}})
+    assert sum(m["poincare"]["count"] for m in members) >= 2
+    raw = client.get(f"/v1/ensembles/{view['id']}/poincare", params={"format": "npz"}).content
+    with np.load(io.BytesIO(raw)) as arrays:
+        expected = np.concatenate([np.asarray(m["poincare"]["points"]["q"]) for m in members])
+        assert arrays["q"].shape == (len(expected), 2) and np.array_equal(arrays["q"], expected)
+    stored = xr.open_dataset(client.get(f"/v1/ensembles/{view['id']}/poincare", params={"format": "netcdf"}).content,
+                             engine="netcdf4").load()
+    assert "q3" not in stored and np.array_equal(stored["q2"].values, expected[:, 1])
+    r = client.post("/v1/jobs", json={**SLEIGH_JOB, "poincare": {"surface": "theta", "value": 100.0}})
+    job = poll_job(client, r.headers["location"], timeout=120.0)
+    assert job["status"] == "succeeded" and job["result"]["poincare"]["count"] == 0
+    header = client.get(f"{r.headers['location']}/section", params={"format": "csv"}).text.splitlines()[0]
+    assert [c.split(" [")[0] for c in header.split(",")] == ["t", "q1", "q2", "q3", "q_dot1", "q_dot2", "q_dot3"]
+    with np.load(io.BytesIO(client.get(f"{r.headers['location']}/section", params={"format": "npz"}).content)) as a:
+        assert a["q"].shape == (0, 3) and a["q_dot"].shape == (0, 3)
+    r = client.post("/v1/jobs", json={**VESELOVA_JOB, "poincare": {"surface": "theta", "value": 100.0}})
+    assert poll_job(client, r.headers["location"], timeout=120.0)["status"] == "succeeded"
+    empty = xr.open_dataset(client.get(f"{r.headers['location']}/section", params={"format": "netcdf"}).content,
+                            engine="netcdf4").load()
+    assert {"q1", "q2", "qdot1", "qdot2"} <= set(empty.data_vars) and "q3" not in empty
