@@ -1,0 +1,103 @@
+"""The invariant-measure search for a user's Lagrangian system (nonholonomic.lagrangian.measure): the
+nonholonomic particle has √(1 + y²) dx dy dz dẋ dẏ, Chaplygin's sleigh has no measure ρ(q) (its
+obstruction is a·m·sin θ/(J + m a²), so with a = 0 it has one), an unconstrained system has Liouville's
+det M dq dq̇. Every ``found`` is re-checked here independently: div(ρ f) of the reduced flow simplified
+to 0 and evaluated in floats at random states."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from nonholonomic.lagrangian import derive, parse_system
+from nonholonomic.lagrangian.measure import POINTWISE_TOLERANCE, measure_verdict
+
+SLEIGH = {"kind": "lagrangian", "coordinates": ["x", "y", "theta"],
+          "L": "m/2*((x_dot - a*sin(theta)*theta_dot)**2 + (y_dot + a*cos(theta)*theta_dot)**2) + J/2*theta_dot**2",
+          "constraints": ["-sin(theta)*x_dot + cos(theta)*y_dot"],
+          "parameters": {"m": 1.3, "a": 0.4, "J": 0.25}}
+PARTICLE = {"kind": "lagrangian", "coordinates": ["x", "y", "z"],
+            "L": "(x_dot**2 + y_dot**2 + z_dot**2)/2 - k/2*(x**2 + y**2 + z**2) - g*z",
+            "constraints": ["z_dot - y*x_dot"], "parameters": {"k": 0.8, "g": 0.3}}
+#: No constraints, a mass matrix depending on q: det M = x²y² + 2y² + 2.
+FREE = {"kind": "lagrangian", "coordinates": ["x", "y"],
+        "L": "((1 + y**2)*x_dot**2 + 2*x*x_dot*y_dot + (2 + x**2)*y_dot**2)/2 - k*y**2/2",
+        "parameters": {"k": 0.5}}
+POLAR = {"kind": "lagrangian", "coordinates": ["r", "phi"], "L": "(r_dot**2 + r**2*phi_dot**2)/2 - r**2/2"}
+
+
+def reduced_field(data, verdict):
+    """The reduced flow in (q, u), rebuilt from the derived equations and the verdict's dependent velocities."""
+    eqs = derive(data)
+    on = dict(verdict.dependent)
+    u = verdict.velocities
+    field = [vi.xreplace(on) for vi in eqs.qdot] + [eqs.qddot[eqs.qdot.index(uj)].xreplace(on) for uj in u]
+    return field, (*eqs.q, *u)
+
+
+def assert_invariant(spec, verdict, at_values: bool = False) -> None:
+    """div(ρ f) = 0 symbolically (parameters symbolic, or their values exactly when ``at_values``) and,
+    relative to its terms, ≤ POINTWISE_TOLERANCE at random states."""
+    data = parse_system(spec)
+    field, x = reduced_field(data, verdict)
+    if at_values:
+        field = [f.xreplace({s: sp.nsimplify(v, rational=True) for s, v in data.parameter_values.items()})
+                 for f in field]
+    terms = [sp.diff(verdict.density * f, xi) for f, xi in zip(field, x)]
+    assert sp.simplify(sp.Add(*terms)) == 0
+    pars = data.parameter_values
+    numeric = sp.lambdify(x, [t.xreplace(pars) for t in terms], "numpy")
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        values = np.array(numeric(*rng.uniform(-1.5, 1.5, len(x))), dtype=float)
+        assert abs(values.sum()) <= POINTWISE_TOLERANCE * np.abs(values).sum()
+
+
+def test_particle_has_the_measure_sqrt_1_plus_y2():
+    verdict = measure_verdict(parse_system(PARTICLE))
+    assert verdict.status == "found", verdict.reason
+    y = sp.Symbol("y", real=True)
+    assert sp.simplify(verdict.density / sp.sqrt(1 + y**2)).is_number
+    assert [str(s) for s in verdict.velocities] == ["x_dot", "y_dot"]
+    assert [str(s) for s, _ in verdict.dependent] == ["z_dot"]
+    assert verdict.residual is not None and verdict.residual <= POINTWISE_TOLERANCE
+    assert "vanishes identically" in verdict.reason
+    assert_invariant(PARTICLE, verdict)
+
+
+def test_sleigh_has_no_measure_and_the_reason_names_the_obstruction():
+    verdict = measure_verdict(parse_system(SLEIGH))
+    assert verdict.status == "none", verdict.reason
+    assert verdict.density is None
+    assert "not closed" in verdict.reason and "d g_theta/dx" in verdict.reason
+    assert "a*m*sin(theta)/(J + a**2*m)" in verdict.reason  # vanishes only for a = 0
+
+
+def test_sleigh_with_the_edge_at_the_centre_of_mass_has_a_measure():
+    spec = dict(SLEIGH, parameters={"m": 1.3, "a": 0.0, "J": 0.25})
+    verdict = measure_verdict(parse_system(spec))
+    assert verdict.status == "found", verdict.reason
+    assert "substituted exactly" in verdict.reason
+    theta = sp.Symbol("theta", real=True)
+    assert sp.simplify(verdict.density * sp.cos(theta)).is_number  # 1/cos θ: u = (ẋ, θ̇), ẏ = tan θ ẋ
+    assert_invariant(spec, verdict, at_values=True)
+
+
+@pytest.mark.parametrize("spec, det_m", [(FREE, "x**2*y**2 + 2*y**2 + 2"), (POLAR, "r**2")])
+def test_unconstrained_system_has_liouville_measure_det_m(spec, det_m):
+    verdict = measure_verdict(parse_system(spec))
+    assert verdict.status == "found", verdict.reason
+    assert verdict.dependent == ()
+    symbols = {str(s): s for s in verdict.density.free_symbols}
+    expected = sp.sympify(det_m, locals=symbols)
+    assert sp.simplify(verdict.density / expected).is_number
+    assert_invariant(spec, verdict)
+
+
+def test_past_its_budget_the_search_is_undecided():
+    spec = dict(SLEIGH, parameters={"m": 1.7, "a": 0.3, "J": 0.35})  # not searched before in this process
+    verdict = measure_verdict(parse_system(spec), budget_s=0.0)
+    assert verdict.status in ("undecided", "none")  # "none" if the search happened to finish at once
+    if verdict.status == "undecided":
+        assert "did not finish" in verdict.reason
