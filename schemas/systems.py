@@ -7,7 +7,9 @@ from those declarations so the API cannot disagree with the core.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import json
+from collections.abc import Callable, Mapping, Sequence
+from functools import lru_cache
 from typing import Annotated, Any, Literal, Union
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, ValidationInfo, create_model, field_validator
@@ -323,10 +325,16 @@ SYSTEM_MODELS: dict[str, type[SystemSpec]] = {kind: _system_model(kind) for kind
 AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discriminator="kind")]  # type: ignore[valid-type]
 
 
-def definition_of(system_json: dict[str, Any]) -> MechanicalSystem:
+def definition_of(system_json: Mapping[str, Any]) -> MechanicalSystem:
     """The core's definition of a stored (already validated) request's ``system`` block: its names,
     state, units and field (a user-written system's without Theorem 1's reduction, which only its job
-    or ensemble needs)."""
+    or ensemble needs). Remembered by the block's JSON: an export asks for units, widths and labels."""
+    return _definition_of(json.dumps(system_json, sort_keys=True))
+
+
+@lru_cache(maxsize=64)
+def _definition_of(system_text: str) -> MechanicalSystem:
+    system_json = json.loads(system_text)
     if system_json["kind"] in SYSTEM_MODELS:
         return SYSTEM_MODELS[system_json["kind"]].model_validate(system_json).definition()
     from pydantic import TypeAdapter

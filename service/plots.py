@@ -233,12 +233,11 @@ def _definition(system_info: Mapping[str, Any], request: Mapping[str, Any] | Non
     potential = system_info.get("potential", "zero")
     surface = None
     if system_info["kind"] in ("generalized_chaplygin", "lagrangian"):  # the user's system lives in the request
-        from schemas.systems import GeneralizedChaplyginSpec, LagrangianSpec
+        from schemas.systems import definition_of
 
         if request is None or "system" not in request:
             raise PlotUnavailable("the system of this result is in its request, which is not given")
-        spec = GeneralizedChaplyginSpec if system_info["kind"] == "generalized_chaplygin" else LagrangianSpec
-        return spec.model_validate(request["system"]).validation_definition()
+        return definition_of(request["system"])
     if system_info["kind"] in SURFACE_KINDS:
         from schemas.systems import SurfaceSpec
 

@@ -15,14 +15,8 @@ from scipy.integrate import solve_ivp
 from sympy.physics.mechanics import LagrangesMethod, dynamicsymbols
 
 from nonholonomic.lagrangian import DataError, derive, parse_system
+from tests.lagrangian_examples import PARTICLE, SLEIGH
 
-SLEIGH = {"kind": "lagrangian", "coordinates": ["x", "y", "theta"],
-          "L": "m/2*((x_dot - a*sin(theta)*theta_dot)**2 + (y_dot + a*cos(theta)*theta_dot)**2) + J/2*theta_dot**2",
-          "constraints": ["-sin(theta)*x_dot + cos(theta)*y_dot"],
-          "parameters": {"m": 1.3, "a": 0.4, "J": 0.25}}
-PARTICLE = {"kind": "lagrangian", "coordinates": ["x", "y", "z"],
-            "L": "(x_dot**2 + y_dot**2 + z_dot**2)/2 - k/2*(x**2 + y**2 + z**2) - g*z",
-            "constraints": ["z_dot - y*x_dot"], "parameters": {"k": 0.8, "g": 0.3}}
 #: Relative agreement with LagrangesMethod at random states (both are exact rational functions evaluated in floats).
 REFERENCE_RTOL = 1e-12
 RK = {"method": "DOP853", "rtol": 1e-12, "atol": 1e-12}

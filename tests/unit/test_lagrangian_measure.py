@@ -12,14 +12,8 @@ import sympy as sp
 
 from nonholonomic.lagrangian import derive, parse_system
 from nonholonomic.lagrangian.measure import POINTWISE_TOLERANCE, measure_verdict
+from tests.lagrangian_examples import PARTICLE, SLEIGH
 
-SLEIGH = {"kind": "lagrangian", "coordinates": ["x", "y", "theta"],
-          "L": "m/2*((x_dot - a*sin(theta)*theta_dot)**2 + (y_dot + a*cos(theta)*theta_dot)**2) + J/2*theta_dot**2",
-          "constraints": ["-sin(theta)*x_dot + cos(theta)*y_dot"],
-          "parameters": {"m": 1.3, "a": 0.4, "J": 0.25}}
-PARTICLE = {"kind": "lagrangian", "coordinates": ["x", "y", "z"],
-            "L": "(x_dot**2 + y_dot**2 + z_dot**2)/2 - k/2*(x**2 + y**2 + z**2) - g*z",
-            "constraints": ["z_dot - y*x_dot"], "parameters": {"k": 0.8, "g": 0.3}}
 #: No constraints, a mass matrix depending on q: det M = x²y² + 2y² + 2.
 FREE = {"kind": "lagrangian", "coordinates": ["x", "y"],
         "L": "((1 + y**2)*x_dot**2 + 2*x*x_dot*y_dot + (2 + x**2)*y_dot**2)/2 - k*y**2/2",
