@@ -7,7 +7,6 @@
   package is copied to ``assets/mathjax/`` and loaded only by pages that hold math (``arithmatex``
   spans in Markdown pages; the notebooks' own MathJax tag is pointed at the local copy). Notebook pages
   rendered by mkdocs-jupyter also lose nbconvert's Mermaid loader, which would import from a CDN.
-- Every notebook in ``docs/tutorials/`` appears under Tutorials, listed in the nav or not.
   The built site requests nothing from elsewhere.
 """
 
@@ -236,26 +235,10 @@ def _mathjax_source() -> Path:
     return source
 
 
-def _listed(entries: Any) -> set[str]:
-    if isinstance(entries, str):
-        return {entries}
-    if isinstance(entries, dict):
-        return set().union(*(_listed(v) for v in entries.values())) if entries else set()
-    if isinstance(entries, list):
-        return set().union(*(_listed(v) for v in entries)) if entries else set()
-    return set()
-
-
 def on_config(config: MkDocsConfig) -> MkDocsConfig:
-    """Fail early without MathJax; list every notebook of docs/tutorials/ under Tutorials (those the nav
-    names keep their place and title, the others follow in the order of their file names)."""
+    """Fail early without MathJax. (Every notebook must be in the nav: the strict build's
+    ``omitted_files`` check refuses one that is not.)"""
     _mathjax_source()
-    nav = config.get("nav") or []
-    section = next((entry["Tutorials"] for entry in nav if isinstance(entry, dict) and "Tutorials" in entry), None)
-    if isinstance(section, list):
-        listed = _listed(nav)
-        notebooks = sorted(Path(config["docs_dir"], "tutorials").glob("*.ipynb"))
-        section.extend(f"tutorials/{nb.name}" for nb in notebooks if f"tutorials/{nb.name}" not in listed)
     return config
 
 
