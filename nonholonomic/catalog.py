@@ -113,7 +113,7 @@ def lagrangian_entry() -> dict[str, Any]:
         "state": ["q", "q_dot"],
         "integrals": ["energy: E = (q_dot, dL/dq_dot) - L",
                       "constraint i: the i-th constraint, 0 along the motion"],
-        "measure": lag.NO_MEASURE,
+        "measure": lag.MEASURE_SEARCH,
         "initial_state": f"q and q_dot, one component per coordinate; q_dot must satisfy every constraint to "
                          f"{lag.CONSTRAINT_TOLERANCE:g} times its terms, or project_initial_state projects it",
         "checks": ["integrals", "measure"], "example": lag.EXAMPLE_JOB}

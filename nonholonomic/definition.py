@@ -246,11 +246,16 @@ class InvariantMeasure:
 
     ``density`` None: no measure is claimed (a user's generalized Chaplygin system for which Theorem 1
     finds none); ``formula`` says why.
+
+    ``on_manifold``: the claim holds on an invariant manifold of the state only (a Lagrangian system's
+    constraint manifold A(q) q̇ = 0), given as substitutions ``symbol → expression`` that solve its
+    equations; ``div(density · f)`` vanishes identically after them (and pointwise at states on it).
     """
 
     density: sp.Expr | None
     formula: str
     equation: str
+    on_manifold: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -288,6 +293,9 @@ class MechanicalSystem:
     constraints: tuple[StateConstraint, ...] = ()
     notes: tuple[str, ...] = field(default=())
     hamiltonian_form: Any = field(default=None, compare=False)
+    structure: Any = field(default=None, compare=False)
+    """What a structure search found for a user's system (a JSON-able mapping: the measure verdict, the
+    integrals in an ansatz, the Hamiltonization), shown with the job's result; None for the paper's kinds."""
     """A Hamiltonian form after a time substitution that comes with the definition (Theorem 1's for a
     user's generalized Chaplygin system), a :class:`nonholonomic.hamiltonization.HamiltonianForm`."""
 

@@ -25,7 +25,7 @@ MAX_POINTS = 50
 
 #: Kinds whose Hamiltonian form comes with the definition, when Theorem 1 gives one (else the check
 #: says why not).
-THEOREM_1_KINDS = frozenset({"generalized_chaplygin"})
+THEOREM_1_KINDS = frozenset({"generalized_chaplygin", "lagrangian"})
 
 
 def structural_checks(kind: str) -> tuple[str, ...]:
@@ -50,6 +50,12 @@ def _to_bracket_variables(system: MechanicalSystem) -> tuple[VectorKernel, tuple
     return vectorize(form.to_bracket_variables, args), where
 
 
+def _why_no_form(system: MechanicalSystem) -> str:
+    """Why a user's system has no Hamiltonian form: its Hamiltonization verdict, else its measure's."""
+    verdict = (system.structure or {}).get("hamiltonization") or {}
+    return str(verdict.get("reason") or system.measure.formula)
+
+
 def bracket_evidence(system: MechanicalSystem, parameters: np.ndarray, states: np.ndarray) -> list[CheckEvidence]:
     """The time-substituted flow against the Hamiltonian vector field (and its control in time t),
     then the bracket itself (Jacobi identity, Casimirs, rank) at the mapped states."""
@@ -60,7 +66,7 @@ def bracket_evidence(system: MechanicalSystem, parameters: np.ndarray, states: n
     if hamiltonian_form(system) is None:  # a user's system without Theorem 1's multiplier
         return [CheckEvidence(name="hamiltonian_flow", quantity="d y/d tau - {H, y}", formula="none",
                               equation=system.equation, method="symbolic", residual=None, tolerance=None, passed=None,
-                              detail="no Hamiltonian form: " + system.measure.formula)]
+                              detail="no Hamiltonian form: " + _why_no_form(system))]
     items = hamiltonian_form_evidence(system, parameters, points)
     to_bracket, where = _to_bracket_variables(system)
     form = hamiltonian_form(system)

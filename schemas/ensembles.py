@@ -101,6 +101,9 @@ class EnsembleRequest(BaseModel):
     _t_final_limit = field_validator("t_final")(t_final_within_limit)
 
     def definition(self) -> MechanicalSystem:
+        """The members' shared definition (a sweep of a user-written system's parameter: its generic one)."""
+        if self.members.sweep is not None and hasattr(self.system, "generic_definition"):
+            return self.system.generic_definition()  # type: ignore[no-any-return]
         return self.system.definition()  # type: ignore[attr-defined]
 
     def effective_chunk_size(self, system: MechanicalSystem | None = None) -> int:
@@ -108,7 +111,7 @@ class EnsembleRequest(BaseModel):
         ``max_ensemble_chunks`` chunks (each is a message the POST sends)."""
         if self.chunk_size:
             return self.chunk_size
-        size = default_chunk_size(system or self.definition(), self.t_final,
+        size = default_chunk_size(system or self.system.validation_definition(), self.t_final,  # type: ignore[attr-defined]
                                   poincare=self.poincare.options() if self.poincare else None,
                                   lyapunov=self.lyapunov.options() if self.lyapunov else None)
         return max(size, -(-self.members.count // get_settings().max_ensemble_chunks))

@@ -70,6 +70,10 @@ class SystemInfo(BaseModel):
     potential_formula: str
     parameters: dict[str, Any]
     units: dict[str, str]
+    structure: dict[str, Any] | None = Field(
+        None, description="for a system written by the user (kind lagrangian): what the structure search found, "
+                          "each with its verdict: 'measure' (found / none / undecided, the density and why), "
+                          "'integrals' (linear and quadratic in the velocities, in an ansatz), 'hamiltonization'")
 
 
 class Trajectory(BaseModel):
@@ -160,7 +164,8 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
     return {
         "system": {"kind": system.kind, "title": system.title, "equation": system.equation,
                    "potential": system.potential, "potential_formula": system.potential_formula,
-                   "parameters": parameters, "units": units},
+                   "parameters": parameters, "units": units,
+                   **({"structure": system.structure} if system.structure is not None else {})},
         "initial_state": {name: values[0] for name, values in samples.items()},
         "projections": [asdict(p) for p in result.projections],
         "final_state": {name: values[-1] for name, values in samples.items()},

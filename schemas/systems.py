@@ -492,12 +492,16 @@ class LagrangianSpec(SystemSpec):
                                           tuple(self.parameters.items()))
 
     def definition(self) -> MechanicalSystem:
-        """The system with its derived equations of motion (symbolic work, cached)."""
+        """The system with its derived equations of motion and the structure search (symbolic work, cached)."""
         return lag.define(self.data())
 
     def validation_definition(self) -> MechanicalSystem:
-        """The same as :meth:`definition`: the equations are what a request is checked against."""
-        return self.definition()
+        """The equations without the structure search (enough to check a request: names, state, the field)."""
+        return lag.define(self.data(), reduce=False)
+
+    def generic_definition(self) -> MechanicalSystem:
+        """The definition an ensemble sweeping a parameter shares: only what holds for every value claimed."""
+        return lag.define(self.data(), generic=True)
 
     def expressions(self) -> list[tuple[str, str]]:
         return [("system.L", self.L), *((f"system.constraints[{i}]", c) for i, c in enumerate(self.constraints))]

@@ -20,9 +20,11 @@ The differentiated constraint is what holds the motion on A q̇ = 0: the flow ke
 stays zero from initial data on the constraint. The constraint forces Aᵀλ do no work on the motion
 (q̇ᵀAᵀλ = 0), so E = (q̇, ∂L/∂q̇) − L is an integral when L has no explicit t (dE/dt = −∂L/∂t).
 
-M⁻¹ is never formed: M is solved once for the k + 1 right-hand sides Aᵀ and h by LU, each entry
-brought to one fraction (``cancel``) after every step, so the expressions stay reasonably short
-without a full ``simplify``. The whole derivation runs under :func:`nonholonomic.bounded.run`.
+M⁻¹ is never formed: M is solved once for the k + 1 right-hand sides Aᵀ and h by Gaussian elimination in
+exact rational-function arithmetic, sin and cos of a coordinate as generators with sin² + cos² = 1
+(:mod:`nonholonomic.lagrangian.fractions`: every entry one reduced fraction after every step); an
+expression that does not fit it falls back to LU on expression trees, each entry cancelled (``tidy``).
+The whole derivation runs under :func:`nonholonomic.bounded.run`.
 """
 
 from __future__ import annotations
@@ -179,18 +181,57 @@ def _solve(M: sp.Matrix, B: sp.Matrix, points: list[dict[sp.Symbol, float]]) -> 
     return b
 
 
-def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], float]:
-    start = time.perf_counter()
+def _terms(data: LagrangianData) -> tuple[sp.Matrix, list[sp.Expr], sp.Matrix, list[sp.Expr]]:
+    """M, h, A and Ȧ q̇ (each constraint differentiated along the motion at fixed q̇)."""
     q, v, t, L = data.q, data.v, data.t, data.L
-    n, k = len(q), data.A.shape[0]
     M = mass_matrix(data)
     p = [sp.diff(L, vi) for vi in v]
-    h = sp.Matrix([tidy(sum((sp.diff(p[i], qj) * vj for qj, vj in zip(q, v)), sp.Integer(0))
-                        + sp.diff(p[i], t) - sp.diff(L, q[i])) for i in range(n)])
-    A = sp.Matrix(data.A)
-    # Ȧ q̇ = d/dt (A q̇) at fixed q̇
-    Adot_v = sp.Matrix([tidy(sum((sp.diff(f, qj) * vj for qj, vj in zip(q, v)), sp.Integer(0)) + sp.diff(f, t))
-                        for f in data.constraints])
+    h = [sum((sp.diff(p[i], qj) * vj for qj, vj in zip(q, v)), sp.Integer(0)) + sp.diff(p[i], t) - sp.diff(L, q[i])
+         for i in range(len(q))]
+    Adot_v = [sum((sp.diff(f, qj) * vj for qj, vj in zip(q, v)), sp.Integer(0)) + sp.diff(f, t)
+              for f in data.constraints]
+    return M, h, sp.Matrix(data.A), Adot_v
+
+
+def _derive_in_fractions(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...]] | None:
+    """q̈ and λ in exact rational-function arithmetic (:mod:`nonholonomic.lagrangian.fractions`); None when
+    an expression does not fit it (a constant such as pi, a function of a function)."""
+    from nonholonomic.lagrangian.fractions import fractions_for
+
+    M, h, A, Adot_v = _terms(data)
+    n, k = len(data.q), A.shape[0]
+    exprs = [*M, *h, *A, *Adot_v]
+    try:
+        F = fractions_for(exprs, data.q, (*data.v, data.t, *data.parameters), sample_points(data))
+        Mf = [[F.element(M[i, j]) for j in range(n)] for i in range(n)]
+        hf = [F.element(e) for e in h]
+        Af = [[F.element(A[a, i]) for i in range(n)] for a in range(k)]
+        Adf = [F.element(e) for e in Adot_v]
+    except (sp.polys.polyerrors.PolynomialError, sp.polys.polyerrors.CoercionFailed, ValueError, TypeError):
+        return None
+    X = F.solve(Mf, [[*(Af[a][i] for a in range(k)), hf[i]] for i in range(n)])  # (M⁻¹Aᵀ | M⁻¹h)
+    W, u = [row[:k] for row in X], [row[k] for row in X]
+    if k:
+        zero = F.field.zero
+        S = [[F.reduce(sum((Af[a][i] * W[i][b] for i in range(n)), zero)) for b in range(k)] for a in range(k)]
+        rhs = [[F.reduce(sum((Af[a][i] * u[i] for i in range(n)), zero) - Adf[a])] for a in range(k)]
+        lam = [row[0] for row in F.solve(S, rhs)]
+        qddot = [F.reduce(sum((W[i][a] * lam[a] for a in range(k)), zero) - u[i]) for i in range(n)]
+    else:
+        lam, qddot = [], [-x for x in u]
+    return tuple(F.expr(e) for e in qddot), tuple(F.expr(e) for e in lam)
+
+
+def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], float]:
+    start = time.perf_counter()
+    exact = _derive_in_fractions(data)
+    if exact is not None:
+        return (*exact, time.perf_counter() - start)
+    # fallback: expression trees, every entry cancelled (slower)
+    M, h_list, A, Adot_list = _terms(data)
+    k = A.shape[0]
+    h = sp.Matrix([tidy(e) for e in h_list])
+    Adot_v = sp.Matrix([tidy(e) for e in Adot_list])
     points = sample_points(data)
     X = _solve(M, A.T.row_join(h) if k else h, points)  # (M⁻¹Aᵀ | M⁻¹h)
     W, u = X[:, :k], X[:, k]

@@ -213,7 +213,7 @@ def energy(data: ChaplyginData) -> sp.Expr:
     return sum(vi * sp.diff(data.L, vi) for vi in data.v) - data.L + data.U
 
 
-def _theorem_1(data: ChaplyginData) -> tuple[Any, str]:
+def theorem_1(data: ChaplyginData) -> tuple[Any, str]:
     """Theorem 1 for the data: (the Hamiltonian form or None, why not)."""
     from nonholonomic.brackets import PoissonStructure
     from nonholonomic.hamiltonization import HamiltonianForm
@@ -269,7 +269,7 @@ def define(data: ChaplyginData, reduce: bool = True) -> MechanicalSystem:
     T = sum(vi * sp.diff(L, vi) for vi in v) / 2  # the size of E's terms
     parameters = tuple(Parameter(str(s), (s,), "parameter of the user's system", "as L needs")
                        for s in data.parameters)
-    form, why = _theorem_1(data) if reduce else (None, "Theorem 1 runs with the job")
+    form, why = theorem_1(data) if reduce else (None, "Theorem 1 runs with the job")
     if form is not None:
         N = form.time_density
         measure = InvariantMeasure(N * (G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0]),

@@ -10,8 +10,18 @@ the state being (q, q̇) (vectors ``q`` and ``q_dot``, n components each, n ≤ 
 
 * the energy E = (q̇, ∂L/∂q̇) − L (the constraint forces do no work: q̇ᵀAᵀλ = 0);
 * every constraint fᵢ = Σⱼ Aᵢⱼ(q) q̇ⱼ, which stays 0 (the derived field keeps A q̇ constant);
-* no invariant measure: the measure search for this kind is not built yet, so none is claimed (the
-  ``measure`` check says so, undecided, never passed).
+* an invariant measure only when the search on the constraint manifold finds and proves one
+  (:func:`nonholonomic.lagrangian.measure.measure_verdict`, with ``reduce``): ρ(q) dq du there, u the
+  independent velocities. In the state (q, q̇) this is the density ρ(q) |det A_D(q)| (A_D the columns of
+  A of the dependent velocities: (u, A q̇) are coordinates of q̇ with Jacobian det A_D), and div(ρ |det A_D| f)
+  vanishes on the manifold, where the motion is (proven with the dependent velocities substituted,
+  :attr:`InvariantMeasure.on_manifold`). A verdict ``none`` (an obstruction proven) or ``undecided`` claims
+  nothing and says which in the ``measure`` check;
+* with ``reduce``, the integrals linear and quadratic in the velocities that the ansatz search proves
+  (:func:`nonholonomic.lagrangian.integrals.integral_search`), each checked along the trajectory too;
+* with ``reduce``, when the system is a Chaplygin system with two shape coordinates: Theorem 1's time
+  dτ = N dt (integrated beside t) and Hamiltonian form, checked by the ``bracket`` check
+  (:mod:`nonholonomic.lagrangian.hamiltonization`).
 
 An initial q̇ off a constraint is refused (tolerance :data:`CONSTRAINT_TOLERANCE` relative to the
 constraint's terms) or, on request, projected onto the constraints: orthogonally (Euclidean) onto the
@@ -40,6 +50,10 @@ from nonholonomic.definition import (
     StateVector,
 )
 from nonholonomic.lagrangian import DataError, LagrangianData, derive
+from nonholonomic.lagrangian.checks import number, sample_points
+from nonholonomic.lagrangian.hamiltonization import hamiltonization
+from nonholonomic.lagrangian.integrals import integral_search
+from nonholonomic.lagrangian.measure import measure_verdict
 from nonholonomic.lagrangian.parse import KIND, MAX_COORDINATES
 from nonholonomic.memo import remembered
 
@@ -50,8 +64,16 @@ TITLE = "Lagrangian system with constraints linear in the velocities, written by
 EQUATION = "Lagrange-d'Alembert"
 #: An initial q̇ may violate a constraint by this much times max(1, Σⱼ |Aᵢⱼ q̇ⱼ|).
 CONSTRAINT_TOLERANCE = 1e-10
-#: Why no invariant measure is claimed.
-NO_MEASURE = "none claimed: the invariant-measure search for lagrangian systems is not built yet (undecided)"
+#: Why no invariant measure is claimed before the search ran (the request's validation).
+NO_MEASURE = "none claimed yet: the invariant-measure search runs with the job"
+#: Why a definition shared by a parameter sweep claims less.
+GENERIC = ("an ensemble sweeping a parameter shares one definition: only what holds for every value of the "
+           "parameters is claimed (the ansatz's integrals and anything found only at the parameters' values are not)")
+#: The measure search, for the catalog.
+MEASURE_SEARCH = ("sought with the job on the constraint manifold, as rho(q) dq du (u the independent velocities): "
+                  "found (the density, proven symbolically and checked pointwise, then claimed and checked along "
+                  "the trajectory as rho |det A_D| in (q, q_dot)), none (an obstruction proven at the parameters' "
+                  "values) or undecided (within the budget); result.system.structure.measure says which and why")
 
 #: Chaplygin's sleigh: a knife edge at distance a from the centre of mass, in the plane.
 EXAMPLE: dict[str, Any] = {
@@ -90,20 +112,69 @@ def _projections(data: LagrangianData) -> tuple[Projection, ...]:
     return tuple(out)
 
 
+def _measure(data: LagrangianData) -> tuple[InvariantMeasure, dict[str, Any]]:
+    """The invariant measure the search proves (or none claimed, with the verdict), and the verdict as JSON."""
+    verdict = measure_verdict(data)
+    summary: dict[str, Any] = {"verdict": verdict.status, "reason": verdict.reason, "seconds": round(verdict.seconds, 3),
+                               "independent_velocities": [str(u) for u in verdict.velocities],
+                               "dependent_velocities": {str(s): sp.sstr(e) for s, e in verdict.dependent}}
+    if verdict.status != "found" or verdict.density is None:
+        return InvariantMeasure(None, f"verdict {verdict.status}: {verdict.reason}", EQUATION), summary  # type: ignore[arg-type]
+    dependent = [data.v.index(s) for s, _ in verdict.dependent]
+    minor = sp.factor(sp.Matrix(data.A).extract(list(range(len(dependent))), dependent).det()) if dependent else 1
+    sign = 1
+    point = sample_points(data)[0]
+    if dependent and (value := number(minor, point)) is not None and value < 0:
+        sign = -1
+    density = sp.factor(verdict.density * sign * minor)
+    u = ", ".join(map(str, verdict.velocities))
+    formula = (f"rho dq du = {sp.sstr(verdict.density)} dq du on the constraint manifold (u = ({u})), i.e. the density "
+               f"{sp.sstr(density)} in (q, q_dot) there")
+    summary.update(density=sp.sstr(verdict.density), density_in_state=sp.sstr(density), residual=verdict.residual,
+                   at_values="substituted exactly" in verdict.reason)
+    return InvariantMeasure(density, formula, EQUATION, on_manifold=verdict.dependent), summary
+
+
+def _integrals(data: LagrangianData) -> tuple[list[FirstIntegral], dict[str, Any]]:
+    """The proven integrals of the ansatz besides the energy, as claims checked along the trajectory, and the
+    search as JSON."""
+    search = integral_search(data)
+    claims = []
+    for integral in search.integrals:
+        if integral.name == "energy" or not integral.proven:
+            continue
+        scale = sum((sp.Abs(term) for term in sp.Add.make_args(sp.expand(integral.expression))), sp.Integer(0))
+        claims.append(FirstIntegral(integral.name, integral.expression, scale, integral.formula,
+                                    "ansatz linear/quadratic in the velocities"))
+    summary = {"status": search.status, "ansatz": search.ansatz, "seconds": round(search.seconds, 3),
+               "found": [{"name": i.name, "degree": i.degree, "expression": sp.sstr(i.expression), "proof": i.proof}
+                         for i in search.integrals],
+               "omitted": search.omitted, "reason": search.reason}
+    return claims, summary
+
+
 @lru_cache(maxsize=64)  # as the kernels and integrators compiled from it
 @remembered("definition")  # derived once per machine and version (nonholonomic.memo)
-def define(data: LagrangianData) -> MechanicalSystem:
+def define(data: LagrangianData, reduce: bool = True, generic: bool = False) -> MechanicalSystem:
     """The user's system as a :class:`MechanicalSystem` in the state (q, q̇).
 
     Parameters
     ----------
     data : LagrangianData
         From :func:`nonholonomic.lagrangian.lagrangian_data` (parsed and checked).
+    reduce : bool
+        Run the structure search (the invariant measure on the constraint manifold, within its budget); without
+        it (a request's validation) no measure is claimed.
+    generic : bool
+        Claim only what holds for every value of the parameters (an ensemble sweeping one shares this
+        definition): not the ansatz's integrals, which are sought at the parameters' values, nor a measure
+        or Hamiltonian form found only at them.
 
     Returns
     -------
     MechanicalSystem
-        State vectors ``q`` and ``q_dot``; integrals: the energy and each constraint; no measure claimed.
+        State vectors ``q`` and ``q_dot``; integrals: the energy and each constraint; the measure the search
+        proved, if any; ``structure``: the verdicts as JSON.
 
     Raises
     ------
@@ -127,6 +198,25 @@ def define(data: LagrangianData) -> MechanicalSystem:
         integrals.append(FirstIntegral(f"constraint {i + 1}", f, scale, f"{text} = 0 (constraint {i + 1})", EQUATION))
         constraints.append(StateConstraint("q_dot", f, 0.0, f"{text} = 0 (constraint {i + 1})", EQUATION,
                                            tolerance=CONSTRAINT_TOLERANCE, scale=scale, projection=projection))
+    form, reduced_time, structure = None, None, None
+    if reduce:
+        measure, summary = _measure(data)
+        found, integrals_summary = _integrals(data)
+        theorem = hamiltonization(data)
+        form, reduced_time = theorem.form, theorem.reduced_time
+        if generic:
+            found, integrals_summary = [], {"status": "not sought", "reason": GENERIC}
+            if measure.density is not None and summary.get("at_values"):
+                measure = InvariantMeasure(None, f"not claimed: {GENERIC}; {measure.formula}", EQUATION)  # type: ignore[arg-type]
+                summary = {**summary, "claimed": False}
+            if form is not None and theorem.summary.get("at_values"):
+                form, reduced_time = None, None
+        integrals += found
+        structure = {"measure": summary, "integrals": integrals_summary,
+                     "hamiltonization": theorem.summary if form is not None or not generic else
+                     {**theorem.summary, "verdict": "not claimed", "reason": GENERIC}}
+    else:
+        measure = InvariantMeasure(None, NO_MEASURE, EQUATION)  # type: ignore[arg-type]
     return MechanicalSystem(
         kind=KIND,
         potential="zero",
@@ -138,12 +228,14 @@ def define(data: LagrangianData) -> MechanicalSystem:
                StateVector("q_dot", v, f"generalized velocities ({', '.join(map(str, v))})", "q's unit/s")),
         rhs=eqs.rhs,
         integrals=tuple(integrals),
-        measure=InvariantMeasure(None, NO_MEASURE, EQUATION),  # type: ignore[arg-type]
-        reduced_time=None,
+        measure=measure,
+        reduced_time=reduced_time,
         potential_formula="U: part of L",
         constraints=tuple(constraints),
         notes=(f"L = {texts['L']}",
                "constraints: " + ("; ".join(f"{texts[f'constraints[{i}]']} = 0" for i in range(len(data.constraints)))
                                   or "none"),
                "Lagrange-d'Alembert equations derived symbolically, the multipliers eliminated"),
+        structure=structure,
+        hamiltonian_form=form,
     )

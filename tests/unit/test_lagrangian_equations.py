@@ -227,3 +227,25 @@ def test_expressions_are_never_evaluated(field, monkeypatch):
     with pytest.raises(DataError) as info:
         parse_system(with_(constraints=["x_dot", "(lambda: 1)()"]))
     assert info.value.field == "constraints[1]"
+
+
+@pytest.mark.parametrize("name", ["suslov_tilted", "rolling_disk"])
+def test_the_rational_function_elimination_equals_the_expression_tree_fallback(name, monkeypatch):
+    """The exact fraction-field path (sin, cos as generators with sin² + cos² = 1) and the LU on expression trees
+    give the same q̈ at random states to 1e-12 (and the fast path is the one used)."""
+    from nonholonomic.lagrangian import equations
+    from nonholonomic.systems.lagrangian_classics import CLASSICS
+
+    data = parse_system(CLASSICS[name]["job"]["system"])
+    fast = equations._derive_in_fractions(data)
+    assert fast is not None
+    monkeypatch.setattr(equations, "_derive_in_fractions", lambda data: None)
+    slow = equations._derive(data)
+    rng = np.random.default_rng(7)
+    symbols = (*data.q, *data.v)
+    for _ in range(4):
+        point = {s: float(x) for s, x in zip(symbols, rng.uniform(0.2, 0.8, len(symbols)))}
+        point.update(data.parameter_values)
+        for a, b in zip(fast[0], slow[0]):
+            x, y = float(a.xreplace(point)), float(b.xreplace(point))
+            assert abs(x - y) <= 1e-12 * max(1.0, abs(y))

@@ -95,3 +95,27 @@ def test_past_its_budget_the_search_is_undecided():
     assert verdict.status in ("undecided", "none")  # "none" if the search happened to finish at once
     if verdict.status == "undecided":
         assert "did not finish" in verdict.reason
+
+
+def test_a_found_measure_is_claimed_and_checked_along_the_trajectory_and_a_wrong_one_fails():
+    """The particle's definition claims ρ|det A_D| = √(1 + y²) on z_dot = y x_dot; the job's measure check proves
+    div(ρ f) = 0 there and finds it ~0 at the samples; with ρ = 1 both fail (div f = −y ẏ/(1 + y²) ≠ 0)."""
+    from dataclasses import replace
+
+    from nonholonomic.definition import InvariantMeasure
+    from nonholonomic.evidence.measure import measure_evidence
+    from nonholonomic.simulation import simulate
+    from nonholonomic.systems.lagrangian import define
+
+    system = define(parse_system(PARTICLE))
+    assert system.measure.density == sp.sqrt(sp.Symbol("y", real=True) ** 2 + 1)
+    assert system.structure["measure"]["verdict"] == "found"
+    state = {"q": [0.3, -0.2, 0.1], "q_dot": [0.5, 0.4, -0.2 * 0.5]}
+    result = simulate(system, PARTICLE["parameters"], state, 10.0, 101, checks=["measure"])
+    symbolic, pointwise = result.checks
+    assert symbolic.passed is True and "z_dot = x_dot*y" in symbolic.detail
+    assert pointwise.passed is True and pointwise.residual <= 1e-12
+    wrong = replace(system, measure=InvariantMeasure(sp.Integer(1), "rho = 1", "test",
+                                                     on_manifold=system.measure.on_manifold))
+    symbolic, pointwise = measure_evidence(wrong, result.parameters, result.trajectory.states)
+    assert symbolic.passed is False and pointwise.passed is False and pointwise.residual > 1e-3

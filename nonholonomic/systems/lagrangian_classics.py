@@ -1,0 +1,135 @@
+"""Classic nonholonomic systems written as the kind ``lagrangian`` (a Lagrangian in coordinates and
+constraints linear in the velocities): the catalog's worked examples, each with the fact it is tested
+against (``tests/api/test_lagrangian_classics.py``).
+
+* **Chaplygin's sleigh** (Chaplygin 1911; Neimark & Fufaev ch. III §5): a knife edge at the contact point
+  (x, y), heading θ, the mass centre a ahead on the blade. Reduced: v̇ = a ω², ω̇ = −m a v ω/(J + m a²)
+  (v = ẋ cos θ + ẏ sin θ, ω = θ̇); ω → 0, v → √(2E/m): the heading tends to a straight motion, an
+  asymptotically stable one, so no invariant measure (verdict ``none``).
+* **The nonholonomic particle** (Bloch, *Nonholonomic mechanics and control*, §1.3; Rosenberg):
+  ż = y ẋ, here in U = k(x² + y²)/2; measure √(1 + y²) dx dy dz dẋ dẏ; z cyclic, so a Chaplygin system
+  and Theorem 1 gives N = 1/√(1 + y²) and a Hamiltonian form.
+* **The Suslov problem** (Suslov 1902; Kozlov 1985): a rigid body about a fixed point with (ω, e) = 0 for a
+  body-fixed e, Euler angles (φ, θ, ψ) z-x-z, inertia diag(I₁, I₂, I₃). A measure exists exactly when e is an
+  eigenvector of the inertia tensor: for e = e₃ (ω₃ = 0) Euler's equations give I₁ω̇₁ = I₂ω̇₂ = 0, the body's
+  ω is constant; for e = (sin α, 0, cos α) not an eigenvector, ω tends to the steady rotation about e₂ with
+  |ω| = √(2E/I₂) (asymptotically stable: no measure).
+* **The rolling disk** (Appell 1900, Korteweg 1899; Neimark & Fufaev ch. III §8): a thin disk of radius R
+  rolling without slipping, mass centre (x, y, R sin θ), z-x-z Euler angles (φ precession, θ the axis' angle
+  to the vertical, ψ spin). Its integrals besides the energy (Appell–Korteweg, hypergeometric in cos θ) make
+  φ̇ and ψ̇ functions of θ along a motion: at every crossing of θ = θ₀ in the same direction the reduced
+  state (θ̇, φ̇, ψ̇) is the same. Measure sin²θ dq du.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from nonholonomic.lagrangian.parse import KIND
+
+__all__ = ["CLASSICS"]
+
+_SUSLOV_L = ("I1/2*(phi_dot*sin(theta)*sin(psi) + theta_dot*cos(psi))**2 + I2/2*(phi_dot*sin(theta)*cos(psi) "
+             "- theta_dot*sin(psi))**2 + I3/2*(phi_dot*cos(theta) + psi_dot)**2")
+
+
+def _suslov_tilted_state() -> dict[str, list[float]]:
+    phi, theta, psi, phi_dot, theta_dot = 0.1, 1.0, 0.2, 0.3, 0.5
+    omega1 = phi_dot * math.sin(theta) * math.sin(psi) + theta_dot * math.cos(psi)
+    psi_dot = -0.6 * omega1 / 0.8 - phi_dot * math.cos(theta)  # ca ω₃ + sa ω₁ = 0, ca = 0.8, sa = 0.6
+    return {"q": [phi, theta, psi], "q_dot": [phi_dot, theta_dot, psi_dot]}
+
+
+def _disk_state() -> dict[str, list[float]]:
+    phi, theta, psi, phi_dot, theta_dot, psi_dot, R = 0.0, 1.2, 0.0, 0.5, 0.1, 3.0, 1.0
+    x_dot = -R * (phi_dot * math.cos(phi) * math.cos(theta) + psi_dot * math.cos(phi)
+                  - theta_dot * math.sin(phi) * math.sin(theta))
+    y_dot = -R * (phi_dot * math.sin(phi) * math.cos(theta) + psi_dot * math.sin(phi)
+                  + theta_dot * math.sin(theta) * math.cos(phi))
+    return {"q": [0.0, 0.0, phi, theta, psi], "q_dot": [x_dot, y_dot, phi_dot, theta_dot, psi_dot]}
+
+
+#: name → {"title", "job" (a POST /v1/jobs body), "facts", "measure" (the verdict the search reaches),
+#: "hamiltonization" (Theorem 1's verdict), "references"}.
+CLASSICS: dict[str, dict[str, Any]] = {
+    "chaplygin_sleigh": {
+        "title": "Chaplygin's sleigh",
+        "job": {"system": {"kind": KIND, "coordinates": ["x", "y", "theta"],
+                           "L": "m/2*((x_dot - a*sin(theta)*theta_dot)**2 + (y_dot + a*cos(theta)*theta_dot)**2) "
+                                "+ J/2*theta_dot**2",
+                           "constraints": ["-sin(theta)*x_dot + cos(theta)*y_dot"],
+                           "parameters": {"m": 1.3, "a": 0.4, "J": 0.25}},
+                "initial_state": {"q": [0.2, -0.1, 0.0], "q_dot": [0.9, 0.0, 0.7]}, "t_final": 40.0,
+                "samples": 401, "checks": ["integrals", "measure"]},
+        "facts": ["reduced: v' = a w^2, w' = -m a v w/(J + m a^2), v = x_dot cos(theta) + y_dot sin(theta), "
+                  "w = theta_dot",
+                  "w -> 0 and v -> sqrt(2E/m): the heading tends to a straight motion (asymptotically stable)",
+                  "no invariant measure rho(q) dq du"],
+        "measure": "none", "hamiltonization": "none",
+        "references": ["S. A. Chaplygin, On the theory of motion of nonholonomic systems (1911)",
+                       "Ju. I. Neimark, N. A. Fufaev, Dynamics of Nonholonomic Systems, ch. III"]},
+    "nonholonomic_particle": {
+        "title": "The nonholonomic particle (z_dot = y x_dot) in a harmonic potential",
+        "job": {"system": {"kind": KIND, "coordinates": ["x", "y", "z"],
+                           "L": "(x_dot**2 + y_dot**2 + z_dot**2)/2 - k*(x**2 + y**2)/2",
+                           "constraints": ["z_dot - y*x_dot"], "parameters": {"k": 1.0}},
+                "initial_state": {"q": [0.3, -0.2, 0.1], "q_dot": [0.5, 0.4, -0.1]}, "t_final": 20.0,
+                "samples": 201, "checks": ["integrals", "measure", "bracket"]},
+        "facts": ["invariant measure sqrt(1 + y^2) dx dy dz dx_dot dy_dot",
+                  "z cyclic: a Chaplygin system (2704-7) with S = y x_dot; Theorem 1: N = 1/sqrt(1 + y^2), "
+                  "Hamiltonian in tau"],
+        "measure": "found", "hamiltonization": "found",
+        "references": ["A. M. Bloch, Nonholonomic Mechanics and Control, section 1.3",
+                       "R. M. Rosenberg, Analytical Dynamics of Discrete Systems (1977)"]},
+    "suslov": {
+        "title": "The Suslov problem, the constraint along a principal axis (omega_3 = 0)",
+        "job": {"system": {"kind": KIND, "coordinates": ["phi", "theta", "psi"], "L": _SUSLOV_L,
+                           "constraints": ["phi_dot*cos(theta) + psi_dot"],
+                           "parameters": {"I1": 1.0, "I2": 2.0, "I3": 3.0}},
+                "initial_state": {"q": [0.1, 1.0, 0.2], "q_dot": [0.3, 0.5, -0.3 * math.cos(1.0)]},
+                "t_final": 50.0, "samples": 201, "checks": ["integrals", "measure"]},
+        "facts": ["omega_3 = 0 and Euler's equations give I1 omega_1' = I2 omega_2' = 0: the body's angular "
+                  "velocity is constant",
+                  "the constraint vector e3 is an eigenvector of the inertia tensor: an invariant measure "
+                  "(here sin(theta)^2 dq du)"],
+        "measure": "found", "hamiltonization": "not applicable",
+        "references": ["G. K. Suslov, Theoretical Mechanics (1902)",
+                       "V. V. Kozlov, On the theory of integration of the equations of nonholonomic mechanics, "
+                       "Adv. Mech. 8 (1985)"]},
+    "suslov_tilted": {
+        "title": "The Suslov problem, the constraint vector not an eigenvector of the inertia tensor",
+        "job": {"system": {"kind": KIND, "coordinates": ["phi", "theta", "psi"], "L": _SUSLOV_L,
+                           "constraints": ["ca*(phi_dot*cos(theta) + psi_dot) + sa*(phi_dot*sin(theta)*sin(psi) "
+                                           "+ theta_dot*cos(psi))"],
+                           "parameters": {"I1": 1.0, "I2": 2.0, "I3": 3.0, "ca": 0.8, "sa": 0.6}},
+                "initial_state": _suslov_tilted_state(), "t_final": 100.0, "samples": 201,
+                "checks": ["integrals", "measure"]},
+        "facts": ["e = (sa, 0, ca) is not an eigenvector of diag(I1, I2, I3): no invariant measure",
+                  "omega tends to the steady rotation about e2 with |omega| = sqrt(2E/I2) (asymptotically stable)"],
+        "measure": "none", "hamiltonization": "not applicable",
+        "references": ["V. V. Kozlov, Adv. Mech. 8 (1985)",
+                       "A. V. Borisov, A. A. Kilin, I. S. Mamaev, Hamiltonicity and integrability of the Suslov "
+                       "problem, Regul. Chaotic Dyn. 16 (2011)"]},
+    "rolling_disk": {
+        "title": "A thin disk rolling without slipping on a plane",
+        "job": {"system": {"kind": KIND, "coordinates": ["x", "y", "phi", "theta", "psi"],
+                           "L": "m/2*(x_dot**2 + y_dot**2 + R**2*cos(theta)**2*theta_dot**2) + A/2*(theta_dot**2 "
+                                "+ phi_dot**2*sin(theta)**2) + C/2*(psi_dot + phi_dot*cos(theta))**2 "
+                                "- m*g*R*sin(theta)",
+                           "constraints": ["x_dot + R*(phi_dot*cos(phi)*cos(theta) + psi_dot*cos(phi) "
+                                           "- theta_dot*sin(phi)*sin(theta))",
+                                           "y_dot + R*(phi_dot*sin(phi)*cos(theta) + psi_dot*sin(phi) "
+                                           "+ theta_dot*sin(theta)*cos(phi))"],
+                           "parameters": {"m": 1.0, "R": 1.0, "A": 0.25, "C": 0.5, "g": 9.81}},
+                "initial_state": _disk_state(), "t_final": 50.0, "samples": 501, "checks": ["integrals", "measure"],
+                "poincare": {"surface": "theta", "value": 1.2, "direction": "increasing",
+                             "coordinates": ["phi_dot", "psi_dot"]}},
+        "facts": ["Appell-Korteweg integrals: phi_dot and psi_dot are functions of theta along a motion, so every "
+                  "crossing of theta = theta_0 upwards has the same (theta_dot, phi_dot, psi_dot)",
+                  "invariant measure sin(theta)^2 dq du"],
+        "measure": "found", "hamiltonization": "not applicable",
+        "references": ["P. Appell, Sur l'integration des equations du mouvement d'un corps pesant de revolution "
+                       "roulant... (1900)", "D. J. Korteweg (1899)",
+                       "Ju. I. Neimark, N. A. Fufaev, Dynamics of Nonholonomic Systems, ch. III"]},
+}
