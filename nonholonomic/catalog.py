@@ -99,6 +99,7 @@ def lagrangian_entry() -> dict[str, Any]:
     """How to pose a Lagrangian system with constraints linear in the velocities (``GET /v1/systems/lagrangian``)."""
     from nonholonomic.lagrangian.parse import RESERVED, VELOCITY_SUFFIX
     from nonholonomic.systems import lagrangian as lag
+    from nonholonomic.systems.lagrangian_classics import CLASSICS
 
     return {
         "kind": lag.KIND, "title": lag.TITLE, "equation": lag.EQUATION,
@@ -116,4 +117,13 @@ def lagrangian_entry() -> dict[str, Any]:
         "measure": lag.MEASURE_SEARCH,
         "initial_state": f"q and q_dot, one component per coordinate; q_dot must satisfy every constraint to "
                          f"{lag.CONSTRAINT_TOLERANCE:g} times its terms, or project_initial_state projects it",
-        "checks": ["integrals", "measure"], "example": lag.EXAMPLE_JOB}
+        "integrals_search": "integrals linear and quadratic in the velocities, sought with the job in a polynomial "
+                            "ansatz at the parameters' values, each proven and then checked along the trajectory "
+                            "(result.system.structure.integrals; one missing is not in the ansatz, not proven absent)",
+        "hamiltonization": "when the system is a Chaplygin system with two shape coordinates (eq. 2704-7): Theorem "
+                           "1's reducing multiplier N, the time d tau = N dt and the Hamiltonian form, checked by the "
+                           "'bracket' check (result.system.structure.hamiltonization)",
+        "checks": ["integrals", "measure", "bracket"], "example": lag.EXAMPLE_JOB,
+        "classics": {name: {key: classic[key] for key in ("title", "job", "facts", "measure", "hamiltonization",
+                                                          "references")}
+                     for name, classic in CLASSICS.items()}}

@@ -151,6 +151,17 @@ class CatalogGeneralizedChaplygin(_Strict):
     example: dict[str, Any] = Field(description="a runnable job: Veselova's system in Euler angles")
 
 
+class LagrangianClassic(_Strict):
+    """A classic nonholonomic system written as a Lagrangian with constraints."""
+
+    title: str
+    job: dict[str, Any] = Field(description="a runnable POST /v1/jobs body")
+    facts: list[str] = Field(description="the closed forms or published facts its tests check")
+    measure: str = Field(description="the invariant-measure verdict the search reaches: found, none or undecided")
+    hamiltonization: str = Field(description="Theorem 1's verdict: found, none or not applicable")
+    references: list[str]
+
+
 class CatalogLagrangian(_Strict):
     """A Lagrangian system of one's own with constraints linear in the velocities as a job's ``system``."""
 
@@ -162,10 +173,14 @@ class CatalogLagrangian(_Strict):
     reserved_names: list[str] = Field(description="names a coordinate or parameter may not take")
     state: list[str] = Field(description="the initial state's vectors (one component per coordinate each)")
     integrals: list[str] = Field(description="what a job claims along the motion")
-    measure: str = Field(description="the invariant measure claimed (none yet)")
+    measure: str = Field(description="how the invariant measure is sought and when it is claimed")
+    integrals_search: str = Field(description="how integrals beyond the energy are sought")
+    hamiltonization: str = Field(description="when Theorem 1's time substitution and Hamiltonian form are given")
     initial_state: str = Field(description="what the initial state must satisfy")
     checks: list[str]
     example: dict[str, Any] = Field(description="a runnable job: Chaplygin's sleigh")
+    classics: dict[str, LagrangianClassic] = Field(
+        description="classic systems as worked examples, each a runnable job with the facts it is tested against")
 
 
 class Catalog(_Strict):

@@ -99,13 +99,19 @@ def _refresh(status: str) -> int | None:
     return REFRESH_S if status in ("queued", "running") else None
 
 
+#: The trajectory plot's caption for a system written by the user (its state is (q, q_dot)).
+TRAJECTORY_CAPTION_OWN = ("the coordinates q in space (the first three) and the velocities q_dot against t (drawn from the "
+                          "integrator's dense output)")
+
+
 def job_plots(result: dict[str, Any] | None, status: str = "succeeded") -> list[tuple[str, str]]:
     """The plots a job's result can draw, with their captions (none before it succeeded: the plot routes
     answer 409 until then)."""
     if status != "succeeded" or not result or "trajectory" not in result:
         return []
-    return [(name, caption) for name, caption in JOB_PLOT_CAPTIONS.items()
-            if name in ("trajectory", "integrals") or result.get(name)]
+    own = (result.get("system") or {}).get("kind") in ("lagrangian", "generalized_chaplygin")
+    return [(name, TRAJECTORY_CAPTION_OWN if own and name == "trajectory" else caption)
+            for name, caption in JOB_PLOT_CAPTIONS.items() if name in ("trajectory", "integrals") or result.get(name)]
 
 
 def ensemble_plots(view: dict[str, Any]) -> list[tuple[str, str, str | None]]:

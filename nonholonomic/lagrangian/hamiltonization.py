@@ -144,7 +144,9 @@ def _hamiltonization(data: LagrangianData) -> Hamiltonization:
     reduced_time = ReducedTime(N, f"d tau = N dt, N = {sp.sstr(N)} (Theorem 1, on the Chaplygin reduction)", "2704-8",
                                "s (times N's unit)")
     return Hamiltonization(form, reduced_time, {**summary, "verdict": "found", "reducing_multiplier": sp.sstr(N),
-                                                "hamiltonian_form": form.formula, "reason": "Theorem 1" + at_values,
+                                                "hamiltonian_form": form.formula, "reason": "Theorem 1: N solves dN/dq1 = N A2, dN/dq2 = -N A1 (the integrability condition "
+                                                          f"holds){at_values}; the reduced system is the user's field on "
+                                                          f"the constraint manifold ({how})",
                                                 "at_values": bool(at_values)})
 
 

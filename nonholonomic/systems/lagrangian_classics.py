@@ -13,7 +13,8 @@ against (``tests/api/test_lagrangian_classics.py``).
   body-fixed e, Euler angles (φ, θ, ψ) z-x-z, inertia diag(I₁, I₂, I₃). A measure exists exactly when e is an
   eigenvector of the inertia tensor: for e = e₃ (ω₃ = 0) Euler's equations give I₁ω̇₁ = I₂ω̇₂ = 0, the body's
   ω is constant; for e = (sin α, 0, cos α) not an eigenvector, ω tends to the steady rotation about e₂ with
-  |ω| = √(2E/I₂) (asymptotically stable: no measure).
+  |ω| = √(2E/I₂) (asymptotically stable: no measure). φ is cyclic, so both are Chaplygin systems in (θ, ψ):
+  Theorem 1 gives N = |cos θ| for the first and no multiplier for the second.
 * **The rolling disk** (Appell 1900, Korteweg 1899; Neimark & Fufaev ch. III §8): a thin disk of radius R
   rolling without slipping, mass centre (x, y, R sin θ), z-x-z Euler angles (φ precession, θ the axis' angle
   to the vertical, ψ spin). Its integrals besides the energy (Appell–Korteweg, hypergeometric in cos θ) make
@@ -92,8 +93,9 @@ CLASSICS: dict[str, dict[str, Any]] = {
         "facts": ["omega_3 = 0 and Euler's equations give I1 omega_1' = I2 omega_2' = 0: the body's angular "
                   "velocity is constant",
                   "the constraint vector e3 is an eigenvector of the inertia tensor: an invariant measure "
-                  "(here sin(theta)^2 dq du)"],
-        "measure": "found", "hamiltonization": "not applicable",
+                  "(here sin(theta)^2 dq du)",
+                  "phi is cyclic: a Chaplygin system in (theta, psi) (2704-7), and Theorem 1 gives N = |cos(theta)|"],
+        "measure": "found", "hamiltonization": "found",
         "references": ["G. K. Suslov, Theoretical Mechanics (1902)",
                        "V. V. Kozlov, On the theory of integration of the equations of nonholonomic mechanics, "
                        "Adv. Mech. 8 (1985)"]},
@@ -106,8 +108,9 @@ CLASSICS: dict[str, dict[str, Any]] = {
                 "initial_state": _suslov_tilted_state(), "t_final": 100.0, "samples": 201,
                 "checks": ["integrals", "measure"]},
         "facts": ["e = (sa, 0, ca) is not an eigenvector of diag(I1, I2, I3): no invariant measure",
-                  "omega tends to the steady rotation about e2 with |omega| = sqrt(2E/I2) (asymptotically stable)"],
-        "measure": "none", "hamiltonization": "not applicable",
+                  "omega tends to the steady rotation about e2 with |omega| = sqrt(2E/I2) (asymptotically stable)",
+                  "phi is cyclic: a Chaplygin system in (theta, psi), and Theorem 1's integrability condition fails"],
+        "measure": "none", "hamiltonization": "none",
         "references": ["V. V. Kozlov, Adv. Mech. 8 (1985)",
                        "A. V. Borisov, A. A. Kilin, I. S. Mamaev, Hamiltonicity and integrability of the Suslov "
                        "problem, Regul. Chaotic Dyn. 16 (2011)"]},

@@ -176,6 +176,35 @@ def test_long_formulas_wrap_in_a_narrow_window(api, browser):
     visit.finish("job-long-formula", api)
 
 
+def test_lagrangian_job_page_shows_its_system_and_the_structure_verdicts(api, browser):
+    """A system of one's own (the nonholonomic particle, a catalog classic): L and the constraint, the Structure
+    section with each verdict and formula, the Hamiltonian-flow checks, and the plots with their own caption."""
+    classic = httpx.get(f"{api}/v1/systems/lagrangian", timeout=30).json()["classics"]["nonholonomic_particle"]
+    location = _submit(api, "/v1/jobs", classic["job"])
+    with httpx.Client(base_url=api, timeout=30) as client:
+        job = poll_job(client, location, timeout=120, interval=0.1)
+    assert job["status"] == "succeeded", job
+    visit = Visit(browser, f"{api}{location}/page", width=900)
+    page = visit.page
+    system = page.locator("#system").inner_text()
+    assert "z_dot - y*x_dot = 0" in system and "(x_dot**2 + y_dot**2 + z_dot**2)/2" in system
+    structure = page.locator("#structure").inner_text()
+    assert "ρ = sqrt(y**2 + 1)" in structure and "N = 1/sqrt(y**2 + 1)" in structure
+    assert structure.count("found") >= 2 and "F1 = y**2 + y_dot**2" in structure
+    assert page.locator("#checks tr", has_text="hamiltonian_flow").count() >= 2
+    assert page.locator("#checks .passed").count() == len(job["result"]["checks"])
+    assert "the coordinates q in space" in page.locator("#plots").inner_text()
+    page.locator("#plots").scroll_into_view_if_needed()  # the plots load lazily, below the evidence
+    for _ in range(300):  # a hang guard of 60 s (wait_for_function evaluates a string: the page's CSP refuses it)
+        images = visit.images_loaded()
+        if images and all(width > 0 for _, width in images):
+            break
+        page.wait_for_timeout(200)
+    assert len(images) == 2 and all(width > 300 for _, width in images), images
+    assert visit.page.evaluate("document.documentElement.scrollWidth <= window.innerWidth")
+    visit.finish("job-lagrangian", api)
+
+
 def test_ensemble_page_shows_summary_members_and_plots(api, browser):
     location = _submit(api, "/v1/ensembles", ENSEMBLE)
     # while it runs: the plots not there yet are said to be so, no image fails (Visit fails on any 4xx)
