@@ -53,6 +53,25 @@ def test_a_sweep_of_a_generalized_chaplygin_parameter(client):
     assert members[0]["final_state"]["q"] != members[2]["final_state"]["q"]
 
 
+def test_a_sweep_of_a_lagrangian_parameter_claims_only_what_holds_for_every_value(client):
+    """The particle's ansatz finds y² + ẏ² at k = 1 (ÿ = −k y: an integral only there); members at k = 0.5 and
+    2 share the sweep's definition, which claims the energy, the constraint and the measure √(1 + y²) (proven
+    with k symbolic), not that integral; every member's claims hold along its orbit."""
+    from nonholonomic.systems.lagrangian_classics import CLASSICS
+
+    job = CLASSICS["nonholonomic_particle"]["job"]
+    single = _single(client, job)
+    assert "F1" in {i["name"] for i in single["integrals"]}
+    view, members = _ensemble(client, {"system": job["system"], "t_final": 10.0, "checks": ["integrals", "measure"],
+                                       "members": {"sweep": {
+        "parameter": "k", "values": [0.5, 1.0, 2.0], "initial_state": job["initial_state"]}}})
+    for member in members:
+        assert {i["name"] for i in member["integrals"]} == {"energy", "constraint 1"}
+        assert all(i["passed"] for i in member["integrals"]), member["integrals"]
+        assert all(c["passed"] for c in member["checks"]), member["checks"]
+    assert any("sqrt(y**2 + 1)" in c["formula"] for c in members[0]["checks"])
+
+
 def test_wrong_widths_and_unsampled_levels_are_named(client):
     body = {"system": SLEIGH_JOB["system"], "t_final": 5.0,
             "members": {"initial_states": [{"q": [0.0, 0.0], "q_dot": [0.0, 0.0, 0.0]}]}}

@@ -191,7 +191,7 @@ print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r
                          cwd=tmp_path, env={**os.environ, "NONHOLONOMIC_URL": base})
     assert run.returncode == 0, run.stderr[-3000:]
     done = [line for line in run.stdout.splitlines() if line.endswith(".ipynb")]  # each one's name, once run
-    assert done == [p.name for p in sorted((ROOT / "docs" / "tutorials").glob("*.ipynb"))] and len(done) == 5, done
+    assert done == [p.name for p in sorted((ROOT / "docs" / "tutorials").glob("*.ipynb"))] and len(done) == 6, done
     cli = env_dir / "bin" / "nonholonomic"
     systems = subprocess.run([str(cli), "--url", base, "systems"], capture_output=True, text=True, timeout=60,
                              check=False, cwd=tmp_path)
