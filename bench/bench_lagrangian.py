@@ -5,11 +5,14 @@ Run from the repository root::
 
     .venv/bin/python bench/bench_lagrangian.py [--runs 7]
 
-For Chaplygin's sleigh (t = 20) and the nonholonomic particle in a harmonic potential (t = 100):
+For Chaplygin's sleigh (t = 20), the nonholonomic particle in a harmonic potential (t = 100), the tilted
+Suslov problem in Euler angles (t = 100) and the rolling disk (t = 50):
 
 1. the seconds of parsing and deriving the Lagrange–d'Alembert equations (sympy, multipliers
-   eliminated: :func:`nonholonomic.lagrangian.derive`), of the system's definition, and of the first
-   integration (heyoka's compile, or its disk cache), in this fresh process;
+   eliminated: :func:`nonholonomic.lagrangian.derive`), the elimination in exact rational functions
+   against the expression-tree elimination it replaced (ratio), the system's definition with its
+   structure search (measure, integrals, Theorem 1), and the first integration (heyoka's compile, or
+   its disk cache), in this fresh process;
 2. the core's heyoka integration (tolerance = machine epsilon), median of ``--runs``, and its
    final-state error against a heyoka integrator in extended precision built from the same equations;
 3. scipy's DOP853 on the same equations (sympy lambdify), its tolerance tightened from 1e-8 until its
@@ -39,6 +42,7 @@ from nonholonomic.integration import integrate  # noqa: E402
 from nonholonomic.kernels import parameter_vector, state_vector  # noqa: E402
 from nonholonomic.lagrangian import derive, parse_system  # noqa: E402
 from nonholonomic.systems import lagrangian  # noqa: E402
+from nonholonomic.systems.lagrangian_classics import CLASSICS  # noqa: E402
 
 CASES: dict[str, dict[str, Any]] = {
     "sleigh": {"system": lagrangian.EXAMPLE_JOB["system"], "state": lagrangian.EXAMPLE_JOB["initial_state"],
@@ -48,6 +52,9 @@ CASES: dict[str, dict[str, Any]] = {
                             "constraints": ["z_dot - y*x_dot"], "parameters": {"k": 1.0}},
                  "state": {"q": [0.3, -0.2, 0.0], "q_dot": [0.5, 0.4, -0.1]}, "t_final": 100.0},
 }
+for _name in ("suslov_tilted", "rolling_disk"):
+    _job = CLASSICS[_name]["job"]
+    CASES[_name] = {"system": _job["system"], "state": _job["initial_state"], "t_final": _job["t_final"]}
 #: scipy's DOP853 raises rtol to 100 eps (2.2e-14) below that: the tightest tolerance asked is its floor.
 SCIPY_TOLERANCES = (1e-8, 1e-9, 1e-10, 1e-11, 1e-12, 1e-13, 2.3e-14)
 
@@ -70,9 +77,19 @@ def run_case(name: str, case: dict[str, Any], runs: int) -> None:
     data = parse_system(case["system"])
     equations = derive(data)
     derived_s = time.perf_counter() - start
+    from nonholonomic.lagrangian import equations as eq
+
+    fraction_s = median_time(lambda: eq._derive(data), 3)[0]
+    fast = eq._derive_in_fractions
+    eq._derive_in_fractions = lambda data: None  # the expression-tree elimination it replaced
+    try:
+        tree_s = median_time(lambda: eq._derive(data), 1)[0]
+    finally:
+        eq._derive_in_fractions = fast
     start = time.perf_counter()
     system = lagrangian.define(data)
     define_s = time.perf_counter() - start
+    structure = system.structure
     p = parameter_vector(system, dict(case["system"]["parameters"]))
     y0 = state_vector(system, case["state"], p)
     t_final = case["t_final"]
@@ -107,8 +124,13 @@ def run_case(name: str, case: dict[str, Any], runs: int) -> None:
     c_heyoka = max(float(np.max(np.abs(constraint(*y)))) for y in trajectory.step_states)
     scale = max(abs(float(e_heyoka[0])), 1e-300)
     print(f"\n{name}: {len(data.q)} coordinates, {len(data.constraints)} constraint(s), t = {t_final:g}")
-    print(f"  parse + derive {derived_s:.2f} s; definition {define_s:.2f} s (memo or derived); first integration "
-          f"{first_s:.2f} s (compile or heyoka's disk cache)")
+    print(f"  parse + derive {derived_s:.2f} s; definition with the structure search {define_s:.2f} s (measure "
+          f"{structure['measure']['verdict']} in {structure['measure']['seconds']:.2f} s, integrals "
+          f"{len(structure['integrals']['found'])} in {structure['integrals']['seconds']:.2f} s, Theorem 1 "
+          f"{structure['hamiltonization']['verdict']}); first integration {first_s:.2f} s (compile or heyoka's disk "
+          "cache)")
+    print(f"  elimination: exact rational functions {fraction_s:.3f} s, expression trees (cancel) {tree_s:.2f} s: "
+          f"ratio {tree_s / fraction_s:.0f}x")
     print(f"  heyoka: {heyoka_s * 1e3:.2f} ms ({trajectory.steps} steps), final-state error {heyoka_error:.2e} "
           f"(extended-precision reference; its own round trip t -> 0 {roundtrip:.1e}, large where the backward "
           "flow expands)")
