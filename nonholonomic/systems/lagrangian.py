@@ -29,8 +29,7 @@ rows of A made orthogonal by Gram–Schmidt, one constraint after the other, so 
 projection the first i constraints hold.
 
 Jobs integrate autonomous systems: an L or a constraint with the time t explicitly is refused here
-(:class:`~nonholonomic.lagrangian.DataError` naming the field), as is a parameter-free numeric field
-the integrator cannot take.
+(:class:`~nonholonomic.lagrangian.DataError` naming the field).
 """
 
 from __future__ import annotations

@@ -119,3 +119,24 @@ def test_a_found_measure_is_claimed_and_checked_along_the_trajectory_and_a_wrong
                                                      on_manifold=system.measure.on_manifold))
     symbolic, pointwise = measure_evidence(wrong, result.parameters, result.trajectory.states)
     assert symbolic.passed is False and pointwise.passed is False and pointwise.residual > 1e-3
+
+
+@pytest.mark.parametrize("name", ["nonholonomic_particle", "rolling_disk"])
+def test_the_spectrum_sum_is_what_the_measure_on_the_manifold_predicts(name):
+    """On the constraint manifold div f of the full flow in (q, q̇) is −d/dt ln(ρ |det A_D|) (the reduced flow's
+    −d/dt ln ρ, and the Jacobian det A_D of q̇ ↦ (u, A q̇)): the sum of the full spectrum, (1/T) ∫ div f dt,
+    equals −[ln(ρ |det A_D|)]/T to round-off; a wrong density (ρ without the proof) would not."""
+    from nonholonomic.analysis.options import SpectrumOptions
+    from nonholonomic.simulation import simulate
+    from nonholonomic.systems.lagrangian import define
+    from nonholonomic.systems.lagrangian_classics import CLASSICS
+
+    job = CLASSICS[name]["job"]
+    system = define(parse_system(job["system"]))
+    result = simulate(system, job["system"]["parameters"], job["initial_state"], 50.0, 11, checks=[],
+                      lyapunov=SpectrumOptions())
+    spectrum = result.lyapunov
+    assert spectrum.sum_expected == 0.0 and spectrum.measure_average is not None
+    assert abs(spectrum.sum - spectrum.measure_average) <= 1e-10 * max(1.0, abs(spectrum.sum))
+    assert abs(spectrum.sum) > 1e-6  # finite T: the prediction is not trivially 0 = 0
+    assert not any("contradicts" in w for w in spectrum.warnings)
