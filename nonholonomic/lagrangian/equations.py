@@ -23,7 +23,9 @@ stays zero from initial data on the constraint. The constraint forces Aᵀλ do 
 M⁻¹ is never formed: M is solved once for the k + 1 right-hand sides Aᵀ and h by Gaussian elimination in
 exact rational-function arithmetic, sin and cos of a coordinate as generators with sin² + cos² = 1
 (:mod:`nonholonomic.lagrangian.fractions`: every entry one reduced fraction after every step); an
-expression that does not fit it falls back to LU on expression trees, each entry cancelled (``tidy``).
+expression that does not fit it falls back to LU on expression trees, each entry cancelled (``tidy``);
+a system too large for either (a rattleback) is eliminated without cancellation (:func:`_plain_solve`:
+correct and small as a DAG, but no closed form for the structure searches).
 The whole derivation runs under :func:`nonholonomic.bounded.run`.
 """
 
@@ -42,6 +44,11 @@ from nonholonomic.lagrangian.parse import LagrangianData
 
 #: Seconds the symbolic derivation may take by default.
 DERIVATION_BUDGET_S = 60.0
+#: M, h and A with more operations than this are eliminated without cancellation (the Suslov problem in Euler
+#: angles has 310, a rattleback with a paraboloid bottom 2400: a single gcd of its fractions takes minutes).
+FRACTIONS_MAX_OPS = 1000
+#: An energy larger than this (sympy operations) is only expanded, not cancelled.
+TIDY_ENERGY_MAX_OPS = 300
 #: An entry larger than this (sympy operations) is only brought together, not cancelled.
 CANCEL_MAX_OPS = 4000
 
@@ -79,6 +86,8 @@ class EquationsOfMotion:
         The constraint functions A q̇ (each = 0 on the motion).
     seconds : float
         How long the derivation took.
+    closed_form : bool
+        Whether q̈ is a cancelled closed form (else the plain elimination's DAG).
     """
 
     q: tuple[sp.Symbol, ...]
@@ -94,6 +103,9 @@ class EquationsOfMotion:
     A: sp.ImmutableMatrix
     constraints: tuple[sp.Expr, ...]
     seconds: float
+    closed_form: bool = True
+    """False when the elimination ran without cancellation (:func:`_plain_solve`): q̈ is correct but no
+    closed form the structure searches could work on."""
 
     @property
     def state(self) -> tuple[sp.Symbol, ...]:
@@ -195,12 +207,16 @@ def _terms(data: LagrangianData) -> tuple[sp.Matrix, list[sp.Expr], sp.Matrix, l
 
 def _derive_in_fractions(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...]] | None:
     """q̈ and λ in exact rational-function arithmetic (:mod:`nonholonomic.lagrangian.fractions`); None when
-    an expression does not fit it (a constant such as pi, a function of a function)."""
-    from nonholonomic.lagrangian.fractions import fractions_for
+    an expression does not fit it (a constant such as pi, a function of a function); raises
+    :class:`~nonholonomic.lagrangian.fractions.TooSlow` for a system too large for it
+    (:data:`FRACTIONS_MAX_OPS`, or past its deadline)."""
+    from nonholonomic.lagrangian.fractions import TooSlow, fractions_for
 
     M, h, A, Adot_v = _terms(data)
     n, k = len(data.q), A.shape[0]
     exprs = [*M, *h, *A, *Adot_v]
+    if sum(sp.count_ops(e) for e in (*M, *h, *A)) > FRACTIONS_MAX_OPS:
+        raise TooSlow("M, h and A too large for the exact elimination")  # one gcd could outlast any deadline
     try:
         F = fractions_for(exprs, data.q, (*data.v, data.t, *data.parameters), sample_points(data))
         Mf = [[F.element(M[i, j]) for j in range(n)] for i in range(n)]
@@ -222,12 +238,58 @@ def _derive_in_fractions(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tup
     return tuple(F.expr(e) for e in qddot), tuple(F.expr(e) for e in lam)
 
 
-def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], float]:
+def _plain_solve(M: list[list[sp.Expr]], B: list[list[sp.Expr]]) -> list[list[sp.Expr]]:
+    """``M⁻¹ B`` by Gaussian elimination without any cancellation (no pivoting: M and A M⁻¹ Aᵀ are
+    positive definite for a kinetic energy, their leading minors never vanish). The entries share their
+    subexpressions: a tree that grows with n, a DAG of O(n³) operations that heyoka's decomposition and
+    ``cse`` keep small."""
+    m = len(M)
+    M, B = [row[:] for row in M], [row[:] for row in B]
+    for c in range(m):
+        for r in range(c + 1, m):
+            if M[r][c] == 0:
+                continue
+            factor = M[r][c] / M[c][c]
+            M[r] = [M[r][j] - factor * M[c][j] for j in range(m)]
+            B[r] = [B[r][j] - factor * B[c][j] for j in range(len(B[r]))]
+    X: list[list[sp.Expr]] = [[] for _ in range(m)]
+    for r in reversed(range(m)):
+        row = B[r][:]
+        for j in range(r + 1, m):
+            if M[r][j] != 0:
+                row = [row[t] - M[r][j] * X[j][t] for t in range(len(row))]
+        X[r] = [x / M[r][r] for x in row]
+    return X
+
+
+def _derive_plain(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...]]:
+    """q̈ and λ by the elimination without cancellation (:func:`_plain_solve`): for systems whose exact
+    elimination is too slow (a rattleback's curved bottom); correct, but not in a short closed form, so the
+    structure searches on it mostly end undecided."""
+    M, h, A, Adot_v = _terms(data)
+    n, k = len(data.q), A.shape[0]
+    X = _plain_solve([[M[i, j] for j in range(n)] for i in range(n)],
+                     [[*(A[a, i] for a in range(k)), h[i]] for i in range(n)])
+    W, u = [row[:k] for row in X], [row[k] for row in X]
+    if not k:
+        return tuple(-x for x in u), ()
+    S = [[sp.Add(*(A[a, i] * W[i][b] for i in range(n))) for b in range(k)] for a in range(k)]
+    rhs = [[sp.Add(*(A[a, i] * u[i] for i in range(n))) - Adot_v[a]] for a in range(k)]
+    lam = [row[0] for row in _plain_solve(S, rhs)]
+    return tuple(sp.Add(*(W[i][a] * lam[a] for a in range(k))) - u[i] for i in range(n)), tuple(lam)
+
+
+def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], float, bool]:
+    from nonholonomic.lagrangian.fractions import TooSlow
+
     start = time.perf_counter()
-    exact = _derive_in_fractions(data)
+    try:
+        exact = _derive_in_fractions(data)
+    except TooSlow:
+        return (*_derive_plain(data), time.perf_counter() - start, False)
     if exact is not None:
-        return (*exact, time.perf_counter() - start)
-    # fallback: expression trees, every entry cancelled (slower)
+        return (*exact, time.perf_counter() - start, True)
+    # an expression the fraction field cannot hold: expression trees, every entry cancelled (slower)
     M, h_list, A, Adot_list = _terms(data)
     k = A.shape[0]
     h = sp.Matrix([tidy(e) for e in h_list])
@@ -241,14 +303,15 @@ def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, .
     else:
         lam = sp.zeros(0, 1)
     qddot = (W * lam - u).applyfunc(tidy) if k else (-u).applyfunc(tidy)
-    return tuple(qddot), tuple(lam), time.perf_counter() - start
+    return tuple(qddot), tuple(lam), time.perf_counter() - start, True
 
 
 def energy_of(data: LagrangianData) -> sp.Expr | None:
     """E = (q̇, ∂L/∂q̇) − L, or None when L depends on t explicitly (then dE/dt = −∂L/∂t)."""
     if data.L.has(data.t):
         return None
-    return tidy(sum((vi * sp.diff(data.L, vi) for vi in data.v), sp.Integer(0)) - data.L)
+    energy = sum((vi * sp.diff(data.L, vi) for vi in data.v), sp.Integer(0)) - data.L
+    return tidy(energy) if sp.count_ops(energy) <= TIDY_ENERGY_MAX_OPS else sp.expand(energy)
 
 
 @lru_cache(maxsize=64)
@@ -275,8 +338,8 @@ def derive(data: LagrangianData, budget_s: float = DERIVATION_BUDGET_S) -> Equat
     outcome = bounded.run(("lagrangian.derive", data), _derive, (data,), budget_s)
     if outcome.status != "done":
         raise DerivationError(f"the equations of motion could not be derived: {outcome.message}")
-    qddot, lam, seconds = outcome.value
+    qddot, lam, seconds, closed_form = outcome.value
     return EquationsOfMotion(
         q=data.q, qdot=data.v, t=data.t, parameters=data.parameters, values=data.values, qddot=qddot,
         multipliers=lam, energy=energy_of(data), L=data.L, mass_matrix=sp.ImmutableMatrix(mass_matrix(data)),
-        A=data.A, constraints=data.constraints, seconds=seconds)
+        A=data.A, constraints=data.constraints, seconds=seconds, closed_form=closed_form)

@@ -448,6 +448,10 @@ def integral_search(data: LagrangianData, budget_s: float = INTEGRALS_BUDGET_S) 
         The integrals (the energy first, each proven symbolically), what was searched, and that an
         integral missing from the list is only not in the ansatz.
     """
+    if not derive(data).closed_form:
+        return IntegralSearch("undecided", (), (), "", (), (1, 2), 0, "not searched: the equations of motion were "
+                              "eliminated without cancellation (too large for the exact elimination); "
+                              f"{NOT_EXHAUSTIVE}", 0.0)
     outcome = bounded.run(("lagrangian.integrals", data, float(budget_s)), _search, (data, budget_s), budget_s)
     if outcome.status == "done":
         return IntegralSearch(*outcome.value)

@@ -351,6 +351,10 @@ def measure_verdict(data: LagrangianData, budget_s: float = MEASURE_BUDGET_S) ->
         ``found`` only with the symbolic and pointwise proof; ``none`` only with an obstruction shown
         non-zero at the parameters' values; else ``undecided`` with the reason.
     """
+    if not derive(data).closed_form:
+        return MeasureVerdict("undecided", None, (), (), "not searched: the equations of motion were eliminated "
+                              "without cancellation (too large for the exact elimination), so the divergence has "
+                              "no closed form to solve X_j ln rho = -c_j with")
     outcome = bounded.run(("lagrangian.measure", data), _search, (data,), budget_s)
     if outcome.status != "done":
         reason = (f"sympy could not decide: {outcome.message}" if outcome.status == "error"

@@ -20,12 +20,37 @@ against (``tests/api/test_lagrangian_classics.py``).
   to the vertical, ψ spin). Its integrals besides the energy (Appell–Korteweg, hypergeometric in cos θ) make
   φ̇ and ψ̇ functions of θ along a motion: at every crossing of θ = θ₀ in the same direction the reduced
   state (θ̇, φ̇, ψ̇) is the same. Measure sin²θ dq du.
+* **The rattleback** (Walker 1896; Garcia & Hubbard 1988; Borisov & Mamaev, *Strange attractors in
+  rattleback dynamics*, 2003): a body with a paraboloid bottom (principal radii of curvature R1, R2 at
+  the contact point, the mass centre h above it when upright) whose principal axes of inertia are turned by δ
+  about the vertical body axis against the curvature directions; coordinates (x, y) of the mass centre, yaw ψ,
+  tilts α, β (ω's vertical component ψ̇ + β̇ sin α). Spun one way it rocks and turns to spin the other way;
+  spun the other way it keeps its sense. Published: no invariant measure (the reversal is an attraction).
+  Here its equations are too large for the exact elimination: they are eliminated without cancellation
+  (correct, compiled from a small DAG), so the measure and integral searches say ``undecided``, not searched.
 """
 
 from __future__ import annotations
 
 import math
 from typing import Any
+
+#: The rattleback's inertia in the curvature frame, (A, B, C, D) [kg m^2] (Garcia & Hubbard's kind of body):
+#: principal moments I1, I2 in the horizontal plane at the angle δ, I3 about the vertical axis.
+_A, _B, _C, _D = 2e-4, 1.6e-3, 1.7e-3, 2e-5
+_HALF = math.hypot((_B - _A) / 2, _D)
+_RATTLEBACK_PARAMETERS = {"m": 1.0, "g": 9.81, "h": 0.01, "R1": 2.0, "R2": 0.045, "I1": (_A + _B) / 2 - _HALF,
+                          "I2": (_A + _B) / 2 + _HALF, "I3": _C, "delta": -0.5 * math.atan2(2 * _D, _B - _A)}
+#: Its mass centre's height over the plane, and Z's derivatives by α and β.
+_Z = "(h*cos(alpha)*cos(beta) + (R1*sin(beta)**2*cos(alpha)**2 + R2*sin(alpha)**2)/(2*cos(alpha)*cos(beta)))"
+_ZA = ("sin(alpha)*(R2 + (R2 - R1)*cos(alpha)**2 + (R1 - 2*h)*cos(alpha)**2*cos(beta)**2)"
+       "/(2*cos(alpha)**2*cos(beta))")
+_ZB = "sin(beta)*(R1 - 2*h + (R1 - R2)/cos(beta)**2 + R2/(cos(alpha)*cos(beta))**2)/2"
+#: The body's angular velocity in the curvature frame, and its vertical component.
+_W1 = "(alpha_dot*cos(beta) - psi_dot*sin(beta)*cos(alpha))"
+_W2 = "(beta_dot + psi_dot*sin(alpha))"
+_W3 = "(alpha_dot*sin(beta) + psi_dot*cos(alpha)*cos(beta))"
+_SPIN = "(psi_dot + beta_dot*sin(alpha))"
 
 from nonholonomic.lagrangian.parse import KIND
 
@@ -135,4 +160,25 @@ CLASSICS: dict[str, dict[str, Any]] = {
         "references": ["P. Appell, Sur l'integration des equations du mouvement d'un corps pesant de revolution "
                        "roulant... (1900)", "D. J. Korteweg (1899)",
                        "Ju. I. Neimark, N. A. Fufaev, Dynamics of Nonholonomic Systems, ch. III"]},
+    "rattleback": {
+        "title": "The rattleback: a body with a paraboloid bottom, its inertia turned against its curvature",
+        "job": {"system": {"kind": KIND, "coordinates": ["x", "y", "psi", "alpha", "beta"],
+                           "L": (f"m/2*(x_dot**2 + y_dot**2 + (alpha_dot*{_ZA} + beta_dot*cos(alpha)*{_ZB})**2)"
+                                 f" + I1/2*(cos(delta)*{_W1} + sin(delta)*{_W2})**2"
+                                 f" + I2/2*(cos(delta)*{_W2} - sin(delta)*{_W1})**2 + I3/2*{_W3}**2 - m*g*{_Z}"),
+                           "constraints": [f"cos(psi)*x_dot + sin(psi)*y_dot - beta_dot*cos(alpha)*{_Z} + {_SPIN}*{_ZA}",
+                                           f"-sin(psi)*x_dot + cos(psi)*y_dot + alpha_dot*{_Z} + {_SPIN}*{_ZB}"],
+                           "parameters": _RATTLEBACK_PARAMETERS},
+                "initial_state": {"q": [0.0, 0.0, 0.0, 0.0, 0.0], "q_dot": [0.0, -0.01 * 0.01, 5.0, 0.01, 0.0]},
+                "t_final": 20.0, "samples": 201, "checks": ["integrals"]},
+        "facts": ["spun at psi_dot = +5 rad/s with a small rocking (alpha_dot = 0.01), the vertical spin "
+                  "psi_dot + beta_dot sin(alpha) turns to about -5 rad/s within 10 s; spun at -5 rad/s it keeps its sense",
+                  "energy and both rolling constraints conserved",
+                  "no invariant measure (published); here the search is not run: the equations are eliminated "
+                  "without cancellation"],
+        "measure": "undecided", "hamiltonization": "not applicable",
+        "references": ["G. T. Walker, On a dynamical top, Q. J. Pure Appl. Math. 28 (1896)",
+                       "A. Garcia, M. Hubbard, Spin reversal of the rattleback: theory and experiment, Proc. R. "
+                       "Soc. A 418 (1988)",
+                       "A. V. Borisov, I. S. Mamaev, Strange attractors in rattleback dynamics, Phys. Usp. 46 (2003)"]},
 }
