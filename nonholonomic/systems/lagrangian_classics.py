@@ -170,9 +170,9 @@ CLASSICS: dict[str, dict[str, Any]] = {
                                            f"-sin(psi)*x_dot + cos(psi)*y_dot + alpha_dot*{_Z} + {_SPIN}*{_ZB}"],
                            "parameters": _RATTLEBACK_PARAMETERS},
                 "initial_state": {"q": [0.0, 0.0, 0.0, 0.0, 0.0], "q_dot": [0.0, -0.01 * 0.01, 5.0, 0.01, 0.0]},
-                "t_final": 20.0, "samples": 201, "checks": ["integrals"]},
+                "t_final": 12.0, "samples": 121, "checks": ["integrals"]},
         "facts": ["spun at psi_dot = +5 rad/s with a small rocking (alpha_dot = 0.01), the vertical spin "
-                  "psi_dot + beta_dot sin(alpha) turns to about -5 rad/s within 10 s; spun at -5 rad/s it keeps its sense",
+                  "psi_dot + beta_dot sin(alpha) turns to about -5 rad/s within 10 s (below -4 at t = 12); spun at -5 rad/s it keeps its sense",
                   "energy and both rolling constraints conserved",
                   "no invariant measure (published); here the search is not run: the equations are eliminated "
                   "without cancellation"],

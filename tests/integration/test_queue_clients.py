@@ -218,12 +218,14 @@ def test_list_pages_through_equal_creation_times(stack):
     jobs = JobStore(DATABASE_URL, 600)
     for job_id in ids:
         jobs.create(job_id, QUICK)
+    # cancelled, not queued: an API of another test sharing the database re-sends queued jobs that no broker
+    # holds (store.jobs.sent_before) and its worker would run them while this test pages
     with jobs.session() as session, session.begin():
-        session.execute(update(JobRow).where(JobRow.id.in_(ids)).values(created=1000.0))
+        session.execute(update(JobRow).where(JobRow.id.in_(ids)).values(created=1000.0, status="cancelled"))
     try:
         everything = _all_pages(client, limit=2)  # pages end inside the tie
         assert len(everything) == len(set(everything)) and everything[-5:] == ids[::-1]  # ties: by id, each once
-        assert _all_pages(client, status="queued", limit=2) == ids[::-1]
+        assert _all_pages(client, status="cancelled", limit=2)[-5:] == ids[::-1]
     finally:
         with jobs.session() as session, session.begin():
             session.execute(delete(JobRow).where(JobRow.id.in_(ids)))
