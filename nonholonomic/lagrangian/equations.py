@@ -31,6 +31,7 @@ The whole derivation runs under :func:`nonholonomic.bounded.run`.
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass
 from functools import lru_cache
@@ -39,7 +40,7 @@ import numpy as np
 import sympy as sp
 
 from nonholonomic import bounded
-from nonholonomic.lagrangian.checks import mass_matrix, number, numeric_matrix, sample_points
+from nonholonomic.lagrangian.checks import mass_matrix, number, numeric_matrix, regular, sample_points
 from nonholonomic.lagrangian.parse import LagrangianData
 
 #: Seconds the symbolic derivation may take by default.
@@ -262,21 +263,53 @@ def _plain_solve(M: list[list[sp.Expr]], B: list[list[sp.Expr]]) -> list[list[sp
     return X
 
 
+def _dependent_columns(data: LagrangianData, A: sp.Matrix) -> list[int]:
+    """k columns of A to solve the constraints for: regular at every sample point, the simplest minor first."""
+    n, k = A.shape[1], A.shape[0]
+    points = sample_points(data)
+    best: tuple[int, list[int]] | None = None
+    for columns in itertools.combinations(range(n), k):
+        minor = A.extract(list(range(k)), list(columns))
+        if all((m := numeric_matrix(minor, p)) is not None and regular(m) for p in points):
+            size = sum(sp.count_ops(e) for e in minor)
+            if best is None or size < best[0]:
+                best = (size, list(columns))
+    if best is None:
+        raise DerivationError("no k velocities can be solved for at every sample point")
+    return best[1]
+
+
 def _derive_plain(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...]]:
-    """q̈ and λ by the elimination without cancellation (:func:`_plain_solve`): for systems whose exact
-    elimination is too slow (a rattleback's curved bottom); correct, but not in a short closed form, so the
-    structure searches on it mostly end undecided."""
+    """q̈ by the elimination without cancellation (:func:`_plain_solve`), projected onto the constraints:
+    for systems whose exact elimination is too slow (a rattleback's curved bottom). With the constraints
+    solved for k velocities, q̇_D = −A_D⁻¹ A_I u, and q̈ = B u̇ + c (c_D = −A_D⁻¹ Ȧ q̇, c_I = 0), the
+    Lagrange–d'Alembert equations projected on the kernel of A (Bᵀ Aᵀ = 0 removes λ) are
+    Bᵀ M B u̇ = −Bᵀ (h + M c): an m × m solve instead of n × n and k × k. d/dt (A q̇) = 0 everywhere, as on
+    the other paths; the field is the same on the constraint manifold. Correct and small as a DAG, but no
+    closed form, so the structure searches do not run on it; no multipliers."""
     M, h, A, Adot_v = _terms(data)
     n, k = len(data.q), A.shape[0]
-    X = _plain_solve([[M[i, j] for j in range(n)] for i in range(n)],
-                     [[*(A[a, i] for a in range(k)), h[i]] for i in range(n)])
-    W, u = [row[:k] for row in X], [row[k] for row in X]
     if not k:
-        return tuple(-x for x in u), ()
-    S = [[sp.Add(*(A[a, i] * W[i][b] for i in range(n))) for b in range(k)] for a in range(k)]
-    rhs = [[sp.Add(*(A[a, i] * u[i] for i in range(n))) - Adot_v[a]] for a in range(k)]
-    lam = [row[0] for row in _plain_solve(S, rhs)]
-    return tuple(sp.Add(*(W[i][a] * lam[a] for a in range(k))) - u[i] for i in range(n)), tuple(lam)
+        return tuple(-row[0] for row in _plain_solve([[M[i, j] for j in range(n)] for i in range(n)],
+                                                     [[e] for e in h])), ()
+    dep = _dependent_columns(data, A)
+    ind = [j for j in range(n) if j not in dep]
+    m = len(ind)
+    AD = A.extract(list(range(k)), dep)
+    gram = AD * AD.T  # A_D⁻¹ = A_Dᵀ (A_D A_Dᵀ)⁻¹: a positive definite solve needs no pivot (A_D's own may vanish)
+    y = _plain_solve([[gram[a, b] for b in range(k)] for a in range(k)],
+                     [[*(-A[a, j] for j in ind), -Adot_v[a]] for a in range(k)])
+    solved = [[sp.Add(*(AD[a, r] * y[a][col] for a in range(k))) for col in range(m + 1)] for r in range(k)]
+    B = [[sp.Integer(1 if j == ind[b] else 0) for b in range(m)] for j in range(n)]
+    c = [sp.Integer(0)] * n
+    for r, j in enumerate(dep):
+        B[j], c[j] = solved[r][:m], solved[r][m]
+    Mc = [sp.Add(*(M[i, j] * c[j] for j in dep)) for i in range(n)]
+    MB = [[sp.Add(*(M[i, j] * B[j][b] for j in range(n) if B[j][b] != 0)) for b in range(m)] for i in range(n)]
+    R = [[sp.Add(*(B[i][a] * MB[i][b] for i in range(n) if B[i][a] != 0)) for b in range(m)] for a in range(m)]
+    rhs = [[-sp.Add(*(B[i][a] * (h[i] + Mc[i]) for i in range(n) if B[i][a] != 0))] for a in range(m)]
+    u_dot = [row[0] for row in _plain_solve(R, rhs)]
+    return tuple(sp.Add(*(B[j][b] * u_dot[b] for b in range(m) if B[j][b] != 0)) + c[j] for j in range(n)), ()
 
 
 def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], float, bool]:
