@@ -40,7 +40,7 @@ import numpy as np
 import sympy as sp
 
 from nonholonomic import bounded
-from nonholonomic.lagrangian.checks import mass_matrix, number, numeric_matrix, regular, sample_points
+from nonholonomic.lagrangian.checks import mass_matrix, number, numeric_matrix, sample_points
 from nonholonomic.lagrangian.parse import LagrangianData
 
 #: Seconds the symbolic derivation may take by default.
@@ -263,20 +263,20 @@ def _plain_solve(M: list[list[sp.Expr]], B: list[list[sp.Expr]]) -> list[list[sp
     return X
 
 
-def _dependent_columns(data: LagrangianData, A: sp.Matrix) -> list[int]:
-    """k columns of A to solve the constraints for: regular at every sample point, the simplest minor first."""
-    n, k = A.shape[1], A.shape[0]
+def dependent_columns(data: LagrangianData) -> tuple[int, ...] | None:
+    """k columns of A to solve the constraints for (the dependent velocities), their minor regular at every
+    sample point: a constant minor first, then the shortest, then the latest columns (the first velocities
+    stay independent); None when no minor is regular at all of them."""
+    n, k = len(data.q), data.A.shape[0]
     points = sample_points(data)
-    best: tuple[int, list[int]] | None = None
+    candidates = []
     for columns in itertools.combinations(range(n), k):
-        minor = A.extract(list(range(k)), list(columns))
-        if all((m := numeric_matrix(minor, p)) is not None and regular(m) for p in points):
-            size = sum(sp.count_ops(e) for e in minor)
-            if best is None or size < best[0]:
-                best = (size, list(columns))
-    if best is None:
-        raise DerivationError("no k velocities can be solved for at every sample point")
-    return best[1]
+        minor = tidy(sp.Matrix(data.A).extract(list(range(k)), list(columns)).det()) if k else sp.Integer(1)
+        values = [number(minor, p) for p in points]
+        if all(v is not None and abs(v) > 1e-10 for v in values):
+            candidates.append((not minor.is_number, sp.count_ops(minor), tuple(-c for c in reversed(columns)),
+                               columns))
+    return min(candidates)[-1] if candidates else None
 
 
 def _derive_plain(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...]]:
@@ -292,7 +292,10 @@ def _derive_plain(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.E
     if not k:
         return tuple(-row[0] for row in _plain_solve([[M[i, j] for j in range(n)] for i in range(n)],
                                                      [[e] for e in h])), ()
-    dep = _dependent_columns(data, A)
+    found = dependent_columns(data)
+    if found is None:
+        raise DerivationError("no k velocities can be solved for at every sample point")
+    dep = list(found)
     ind = [j for j in range(n) if j not in dep]
     m = len(ind)
     AD = A.extract(list(range(k)), dep)

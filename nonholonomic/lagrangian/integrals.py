@@ -35,7 +35,7 @@ from sympy.polys.matrices import DomainMatrix
 
 from nonholonomic import bounded
 from nonholonomic.lagrangian.equations import derive
-from nonholonomic.lagrangian.measure import _dependent_columns, _exact_points, _Failed
+from nonholonomic.lagrangian.measure import _dependent_columns, _Failed
 from nonholonomic.lagrangian.parse import LagrangianData
 
 __all__ = ["INTEGRALS_BUDGET_S", "NOT_EXHAUSTIVE", "Integral", "IntegralSearch", "integral_search"]
@@ -121,7 +121,7 @@ class _System:
         self.q, self.n, self.gq, self.gv = q, n, gens[:n], gens[len(gens) - n:]
         self.trig = {i: tuple(gens[n + 2 * a: n + 2 * a + 2]) for a, i in enumerate(angles)}  # (C, S)
         self.circle = [C**2 + S**2 - 1 for C, S in self.trig.values()]  # C² leading (lex): a Gröbner basis
-        self.dep = _dependent_columns(data, _exact_points(data))
+        self.dep = _dependent_columns(data)
         self.ind = tuple(j for j in range(n) if j not in self.dep)
         self.u, self.gu = tuple(v[j] for j in self.ind), [self.gv[j] for j in self.ind]
         rows = [[self.poly(f)[0].diff(self.gv[j]) for j in range(n)] for f in data.constraints]  # denominators cleared

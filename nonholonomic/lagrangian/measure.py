@@ -38,7 +38,7 @@ import sympy as sp
 
 from nonholonomic import bounded
 from nonholonomic.lagrangian.checks import sample_points
-from nonholonomic.lagrangian.equations import _solve, derive, tidy
+from nonholonomic.lagrangian.equations import _solve, dependent_columns, derive, tidy
 from nonholonomic.lagrangian.parse import LagrangianData
 from nonholonomic.rational_trig import rational_trig_is_zero
 
@@ -125,21 +125,13 @@ def _zero(expr: sp.Expr, data: LagrangianData, points: list[dict[sp.Symbol, sp.E
     return None
 
 
-def _dependent_columns(data: LagrangianData, points: list[dict[sp.Symbol, sp.Expr]]) -> tuple[int, ...]:
-    """k columns of A whose minor is regular at every sample point: a constant minor first, then the
-    shortest, then the latest columns (the first velocities stay independent)."""
-    n, k = len(data.q), data.A.shape[0]
-    candidates = []
-    for columns in itertools.combinations(range(n), k):
-        minor = tidy(sp.Matrix(data.A).extract(list(range(k)), list(columns)).det()) if k else sp.Integer(1)
-        values = [_value(minor, p) for p in points]
-        if all(v is not None and abs(v) > 1e-10 for v in values):
-            candidates.append((not minor.is_number, sp.count_ops(minor), tuple(-c for c in reversed(columns)),
-                               columns))
-    if not candidates:
+def _dependent_columns(data: LagrangianData) -> tuple[int, ...]:
+    """:func:`~nonholonomic.lagrangian.equations.dependent_columns`, or an undecided verdict."""
+    found = dependent_columns(data)
+    if found is None:
         raise _Failed("undecided", "no k velocities can be solved for at every sample point (no k x k minor of A "
                                    "is regular at all of them)")
-    return min(candidates)[-1]
+    return found
 
 
 def _apply(field: sp.Matrix, expr: sp.Expr, q: tuple[sp.Symbol, ...]) -> sp.Expr:
@@ -191,7 +183,7 @@ def _search_symbolic(data: LagrangianData) -> tuple:
     points = _exact_points(data)
     float_points = sample_points(data)
     eqs = derive(data)
-    dep = _dependent_columns(data, points)
+    dep = _dependent_columns(data)
     ind = tuple(j for j in range(n) if j not in dep)
     u = tuple(v[j] for j in ind)
     A = sp.Matrix(data.A)

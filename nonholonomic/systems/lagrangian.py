@@ -200,20 +200,19 @@ def define(data: LagrangianData, reduce: bool = True, generic: bool = False) -> 
     form, reduced_time, structure = None, None, None
     if reduce:
         measure, summary = _measure(data)
-        found, integrals_summary = _integrals(data)
+        # the ansatz is solved at the parameters' values: a generic definition does not seek it
+        found, integrals_summary = ([], {"status": "not sought", "reason": GENERIC}) if generic else _integrals(data)
         theorem = hamiltonization(data)
         form, reduced_time = theorem.form, theorem.reduced_time
-        if generic:
-            found, integrals_summary = [], {"status": "not sought", "reason": GENERIC}
-            if measure.density is not None and summary.get("at_values"):
-                measure = InvariantMeasure(None, f"not claimed: {GENERIC}; {measure.formula}", EQUATION)  # type: ignore[arg-type]
-                summary = {**summary, "claimed": False}
-            if form is not None and theorem.summary.get("at_values"):
-                form, reduced_time = None, None
+        if generic and measure.density is not None and summary.get("at_values"):  # found only at the values
+            measure = InvariantMeasure(None, f"not claimed: {GENERIC}; {measure.formula}", EQUATION)  # type: ignore[arg-type]
+            summary = {**summary, "claimed": False}
+        theorem_summary = theorem.summary
+        if generic and form is not None and theorem.summary.get("at_values"):  # found only at the values
+            form, reduced_time = None, None
+            theorem_summary = {**theorem.summary, "verdict": "not claimed", "reason": GENERIC}
         integrals += found
-        structure = {"measure": summary, "integrals": integrals_summary,
-                     "hamiltonization": theorem.summary if form is not None or not generic else
-                     {**theorem.summary, "verdict": "not claimed", "reason": GENERIC}}
+        structure = {"measure": summary, "integrals": integrals_summary, "hamiltonization": theorem_summary}
     else:
         measure = InvariantMeasure(None, NO_MEASURE, EQUATION)  # type: ignore[arg-type]
     return MechanicalSystem(

@@ -276,7 +276,7 @@ def test_the_projected_elimination_without_cancellation_equals_the_exact_one_on_
         plain = np.array([float(e.xreplace(point)) for e in qddot])
         assert np.max(np.abs(A @ plain + np.array(adot))) < 1e-10
         # on the manifold: the dependent velocities solved from the constraints
-        dep = equations._dependent_columns(data, sp.Matrix(data.A))
+        dep = list(equations.dependent_columns(data))
         ind = [j for j in range(len(data.q)) if j not in dep]
         v = np.array([point[s] for s in data.v])
         v[dep] = np.linalg.solve(A[:, dep], -A[:, ind] @ v[ind])
