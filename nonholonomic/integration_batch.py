@@ -9,6 +9,7 @@ spaced check points written by heyoka with the samples, not every accepted step:
 from __future__ import annotations
 
 import time
+from collections.abc import Container
 
 import heyoka as hy
 import numpy as np
@@ -31,6 +32,16 @@ from nonholonomic.integration import (
     _versions,
 )
 from nonholonomic.taylor import TaylorSystem
+
+
+def lane_sources(count: int, failed: Container[int], lanes: int) -> list[int] | None:
+    """Which member each of ``lanes`` lanes runs when members ``failed`` are left out: the others in
+    order, a failed member's lane and the padding after the last member filled with the last healthy
+    one (lanes do not influence each other); None when every member failed."""
+    healthy = [i for i in range(count) if i not in failed]
+    if not healthy:
+        return None
+    return [i if i in healthy else healthy[-1] for i in range(count)] + [healthy[-1]] * (lanes - count)
 
 
 def integrate_batch(

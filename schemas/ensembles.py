@@ -12,9 +12,13 @@ import re
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
 
+from nonholonomic.analysis.chaos_map import MapOptions
 from nonholonomic.analysis.ensemble import Member, default_chunk_size, plan
+from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges
+from nonholonomic.analysis.grid import plan as plan_grid
+from nonholonomic.analysis.indicators import default_thresholds
 from nonholonomic.definition import MechanicalSystem, Parameter
 from nonholonomic.initial_state import FieldProblem, initial_state_problems, project_initial_state
 from nonholonomic.kernels import parameter_vector, state_vector
@@ -49,20 +53,60 @@ class SweepMembers(BaseModel):
     initial_state: dict[str, StateVec]
 
 
+class GridMembers(BaseModel):
+    """A chaos map's cells: a ``shape[0]`` × ``shape[1]`` grid on the section ``surface = value`` in two
+    state components, each cell's centre completed to a state on ``level`` that crosses the section in
+    ``direction`` (:mod:`nonholonomic.analysis.grid`). Cell ``k = i · shape[1] + j``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    surface: str = Field(description="the section's state component, e.g. 'gamma3'")
+    value: FiniteFloat = Field(0.0, description="the section: surface = value")
+    direction: Literal["increasing", "decreasing"] = Field("increasing", description="the crossing's sense")
+    coordinates: list[str] = Field(min_length=2, max_length=2, description="the plane's two state components")
+    level: dict[str, FiniteFloat] = Field(description="integral name -> value (the energy required), e.g. "
+                                                      "{'energy': 2.0, 'area': 0.0}")
+    shape: list[int] = Field(min_length=2, max_length=2, description="cells along each coordinate (1 .. 512)")
+    ranges: list[list[FiniteFloat]] | None = Field(None, description="[[lo, hi], [lo, hi]] of the coordinates; by "
+                                                                     "default the region the level allows")
+
+    @field_validator("shape")
+    @classmethod
+    def _shape(cls, v: list[int]) -> list[int]:
+        if any(n < 1 or n > 512 for n in v):
+            raise ValueError(f"each side has 1 .. 512 cells, got {v}")
+        return v
+
+    @field_validator("ranges")
+    @classmethod
+    def _ranges(cls, v: list[list[float]] | None) -> list[list[float]] | None:
+        if v is not None and (len(v) != 2 or any(len(r) != 2 or not r[0] < r[1] for r in v)):
+            raise ValueError("give two [lo, hi] pairs with lo < hi")
+        return v
+
+    def grid(self) -> Grid:
+        return Grid(self.surface, self.value, (self.coordinates[0], self.coordinates[1]), dict(self.level),
+                    (self.shape[0], self.shape[1]),
+                    None if self.ranges is None else (tuple(self.ranges[0]), tuple(self.ranges[1])),  # type: ignore[arg-type]
+                    self.direction)
+
+
 class MembersSpec(BaseModel):
-    """Exactly one of ``initial_states``, ``sample``, ``sweep``."""
+    """Exactly one of ``initial_states``, ``sample``, ``sweep``, ``grid``."""
 
     model_config = ConfigDict(extra="forbid")
 
     initial_states: list[dict[str, StateVec]] | None = Field(None, min_length=1)
     sample: SampleMembers | None = None
     sweep: SweepMembers | None = None
+    grid: GridMembers | None = Field(None, description="a chaos map's cells (with 'indicators')")
 
     @model_validator(mode="after")
     def _exactly_one(self) -> MembersSpec:
-        given = [k for k in ("initial_states", "sample", "sweep") if getattr(self, k) is not None]
+        given = [k for k in ("initial_states", "sample", "sweep", "grid") if getattr(self, k) is not None]
         if len(given) != 1:
-            raise ValueError(f"give exactly one of initial_states, sample, sweep (got {', '.join(given) or 'none'})")
+            raise ValueError("give exactly one of initial_states, sample, sweep, grid (got "
+                             f"{', '.join(given) or 'none'})")
         return self
 
     @property
@@ -71,6 +115,8 @@ class MembersSpec(BaseModel):
             return len(self.initial_states)
         if self.sample is not None:
             return self.sample.count
+        if self.grid is not None:
+            return self.grid.shape[0] * self.grid.shape[1]
         return len(self.sweep.values)  # type: ignore[union-attr]
 
 
@@ -97,6 +143,36 @@ class EnsembleRequest(BaseModel):
     integrator: IntegratorOptions = Field(default_factory=IntegratorOptions)
     project_initial_state: bool = Field(False, description="project each member's state onto the constraints")
     chunk_size: int | None = Field(None, ge=1, description="members per chunk (default: about one second of work)")
+    indicators: list[Literal["megno", "fli", "lyapunov"]] | None = Field(
+        None, min_length=1, description="a chaos map's indicators (with members.grid), from one integration of the "
+                                        "tangent flow; the first sets each cell's status")
+    thresholds: dict[str, PositiveFloat] | None = Field(
+        None, description="indicator -> value above which a cell is chaotic (default: megno 3, fli ln T + 3, "
+                          "lyapunov (ln T + 3)/T)")
+
+    @model_validator(mode="after")
+    def _map_fields(self) -> EnsembleRequest:
+        grid = self.members.grid is not None
+        if grid and not self.indicators:
+            raise ValueError("members.grid is a chaos map: give indicators, e.g. ['megno', 'fli']")
+        if self.indicators and not grid:
+            raise ValueError("indicators make a chaos map: give members.grid")
+        if grid and (self.poincare is not None or self.lyapunov is not None):
+            raise ValueError("a chaos map computes its own indicators: leave out poincare and lyapunov")
+        unknown = sorted(set(self.thresholds or {}) - set(self.indicators or []))
+        if unknown:
+            raise ValueError(f"thresholds for indicators not asked for: {', '.join(unknown)}")
+        if len(set(self.indicators or [])) != len(self.indicators or []):
+            raise ValueError("each indicator once")
+        return self
+
+    def map_thresholds(self) -> dict[str, float]:
+        """Every indicator's threshold: the request's, else the default for ``t_final``."""
+        return {**default_thresholds(self.t_final), **(self.thresholds or {})}
+
+    def map_options(self) -> MapOptions:
+        return MapOptions(tuple(self.indicators or ()), self.map_thresholds(), self.members.count,
+                          self.integrator.tolerance)
 
     _t_final_limit = field_validator("t_final")(t_final_within_limit)
 
@@ -113,7 +189,8 @@ class EnsembleRequest(BaseModel):
             return self.chunk_size
         size = default_chunk_size(system or self.system.validation_definition(), self.t_final,  # type: ignore[attr-defined]
                                   poincare=self.poincare.options() if self.poincare else None,
-                                  lyapunov=self.lyapunov.options() if self.lyapunov else None)
+                                  lyapunov=self.lyapunov.options() if self.lyapunov else None,
+                                  indicators=bool(self.indicators))
         return max(size, -(-self.members.count // get_settings().max_ensemble_chunks))
 
     def chunks(self) -> list[tuple[int, int]]:
@@ -208,6 +285,25 @@ class EnsembleRequest(BaseModel):
                 found.append(FieldProblem(exc.field, exc.reason))
         return found
 
+    def grid_ranges(self, system: MechanicalSystem | None = None) -> tuple[tuple[float, float], ...]:
+        """The map's ranges: the request's, else the region its level allows.
+
+        Raises
+        ------
+        LevelProblem
+            If the grid cannot be built (:class:`~nonholonomic.analysis.grid.GridError`).
+        """
+        grid = self.members.grid.grid()  # type: ignore[union-attr]
+        system = system or self.definition()
+        try:
+            plan_grid(system, grid)
+            if grid.ranges is not None:
+                return grid.ranges
+            p = parameter_vector(system, self.system.parameter_values())  # type: ignore[attr-defined]
+            return default_ranges(system, p, grid)
+        except GridError as exc:
+            raise LevelProblem(f"members.grid.{exc.field}", exc.reason) from None
+
     def members_list(self, start: int = 0, stop: int | None = None) -> list[Member]:
         """Members ``start .. stop − 1`` (all by default) as the core's :class:`Member` objects.
 
@@ -235,6 +331,17 @@ class EnsembleRequest(BaseModel):
                 out.append(Member(i, pi, self._state(system, pi, spec.sweep.initial_state),
                                   {"parameter": spec.sweep.parameter, "value": value}))
             return out
+        if spec.grid is not None:
+            grid = spec.grid.grid()
+            try:
+                cells = complete(system, p, grid, self.grid_ranges(system), start, stop)
+            except GridError as exc:
+                raise LevelProblem(f"members.grid.{exc.field}", exc.reason) from None
+            names = grid.coordinates
+            return [Member(i, p, cells.states[i - start],
+                           {"cell": [i // grid.shape[1], i % grid.shape[1]], names[0]: float(cells.values[i - start, 0]),
+                            names[1]: float(cells.values[i - start, 1]), "branches": int(cells.branches[i - start])})
+                    for i in range(start, stop)]
         from nonholonomic.analysis.sampling import LevelError, on_level
 
         sample = spec.sample

@@ -222,9 +222,13 @@ class MemberResultModel(BaseModel):
     the flat state vector, when the member got that far)."""
 
     index: int
-    status: Literal["succeeded", "failed"]
+    status: Literal["succeeded", "failed", "outside"] = Field(description="'outside': a map's cell where no state "
+                                                                          "of the level crosses the section")
     label: dict[str, Any] | None = Field(None, description="what sets the member apart, e.g. {'parameter': 'D', "
-                                                           "'value': 0.5} in a sweep")
+                                                           "'value': 0.5} in a sweep, {'cell': [i, j], 'gamma1': ..., "
+                                                           "'M3': ..., 'branches': 2} in a map")
+    cell: dict[str, Any] | None = Field(None, description="a map's cell: status (regular, chaotic, outside, failed), "
+                                                          "indicators, integral_drift, check")
     error: str | None = Field(None, description="why it failed")
     initial_state: dict[str, list[float]] | list[float] | None = None
     projections: list[ProjectionItem] | None = None

@@ -12,7 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from nonholonomic.analysis.chaos_map import map_summary
 from nonholonomic.analysis.ensemble import summarize
+from nonholonomic.analysis.indicators import default_thresholds
 from schemas.results import system_units
 from schemas.systems import definition_of
 from service.exports import point_array, section_columns, vector_widths
@@ -44,7 +46,16 @@ def view(ensemble_id: str, record: dict[str, Any]) -> dict[str, Any]:
             "chunks": {"total": len(chunks), "done": len(done), "size": chunks[0][1] - chunks[0][0],
                        "workers": workers,
                        "reruns": sum(max(0, n - 1) for n in record.get("starts", {}).values())},
-            "summary": summarize(digests) if digests else None}
+            "summary": _summary(record["request"], digests) if digests else None}
+
+
+def _summary(request: dict[str, Any], digests: list[dict[str, Any]]) -> dict[str, Any]:
+    """The members' summary, with the map's (counts per status, chaotic fraction, thresholds) for a map."""
+    summary = summarize(digests)
+    if request.get("indicators"):
+        thresholds = {**default_thresholds(request["t_final"]), **(request.get("thresholds") or {})}
+        summary["map"] = map_summary(digests, request["indicators"], thresholds)
+    return summary
 
 
 def members_page(store: EnsembleStore, ensemble_id: str, record: dict[str, Any], offset: int,
@@ -58,6 +69,12 @@ def members_page(store: EnsembleStore, ensemble_id: str, record: dict[str, Any],
         members = store.chunk_members(ensemble_id, i) or []
         out.extend(m for m in members if offset <= m["index"] < offset + limit)
     return sorted(out, key=lambda m: m["index"])
+
+
+def all_members(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> Iterator[dict[str, Any]]:
+    """Every member of the finished chunks, chunk by chunk."""
+    for i in sorted(record["done"]):
+        yield from store.chunk_members(ensemble_id, i) or []
 
 
 def section_members(store: EnsembleStore, ensemble_id: str,

@@ -28,6 +28,8 @@ ENSEMBLE_PLOT_CAPTIONS = {
     "poincare": "every member's section points, one colour per member",
     "exponents": "largest Lyapunov exponent of each member, a finite-time estimate (against the swept parameter, "
                  "or a histogram); the members not converged are drawn apart",
+    "map": "the chaos map: each indicator on the section plane, one cell per pixel (grey: outside the level, red: "
+           "failed); the colour bar marks the threshold above which a cell is chaotic",
 }
 #: How to cite, on every page; the same data as ``CITATION.cff`` at the repository's root (a test compares them).
 CITATION = {
@@ -118,7 +120,8 @@ def ensemble_plots(view: dict[str, Any]) -> list[tuple[str, str, str | None]]:
     """The plots an ensemble asked for: (name, caption, why it is not there yet or None). A plot is drawn
     from the finished chunks' members; before one chunk finished with a member that succeeded, the page
     shows the reason in its place, not an image that would answer 409."""
-    wanted = {"poincare": bool(view["request"].get("poincare")), "exponents": bool(view["request"].get("lyapunov"))}
+    wanted = {"poincare": bool(view["request"].get("poincare")), "exponents": bool(view["request"].get("lyapunov")),
+              "map": bool(view["request"].get("indicators"))}
     if not view["chunks"]["done"]:
         pending: str | None = ("no chunk of members is done" +
                                (" (this page reloads every 2 s)" if view["status"] in ("queued", "running") else ""))

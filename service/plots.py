@@ -48,7 +48,7 @@ from nonholonomic.potentials import EXPRESSION
 from nonholonomic.systems import SURFACE_KINDS, get_system
 
 JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov")
-ENSEMBLE_PLOTS: tuple[str, ...] = ("poincare", "exponents")
+ENSEMBLE_PLOTS: tuple[str, ...] = ("poincare", "exponents", "map")
 FORMATS = {"png": "image/png", "svg": "image/svg+xml"}
 
 #: Resolution of PNG output.
@@ -132,8 +132,8 @@ def ensemble_plot(name: str, view: dict, members: Iterable[dict], fmt: str) -> b
     Parameters
     ----------
     name : one of :data:`ENSEMBLE_PLOTS`: ``poincare`` (every member's section points, one colour
-        per member) or ``exponents`` (the largest exponent against the swept parameter, or their
-        histogram).
+        per member), ``exponents`` (the largest exponent against the swept parameter, or their
+        histogram) or ``map`` (a chaos map: one panel per indicator).
     view : the ensemble's view (``GET /v1/ensembles/{id}``; its ``request`` names the system).
     members : the member results (``GET /v1/ensembles/{id}/members`` items), consumed once.
     fmt : ``png`` or ``svg``.
@@ -146,12 +146,13 @@ def ensemble_plot(name: str, view: dict, members: Iterable[dict], fmt: str) -> b
         If no member has what the plot needs.
     """
     from service.plot_ensemble import (
-        ENSEMBLE_FIGURES,  # the ensemble's figures, in their own module
+        ENSEMBLE_FIGURES,  # the ensemble's figures, in their own modules
     )
+    from service.plot_map import map_figure
 
     _check(name, ENSEMBLE_PLOTS, fmt)
     with _LOCK, matplotlib.rc_context(_STYLE):
-        fig = ENSEMBLE_FIGURES[name](view, members)
+        fig = {**ENSEMBLE_FIGURES, "map": map_figure}[name](view, members)
         return _render(fig, fmt)
 
 

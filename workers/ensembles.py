@@ -13,8 +13,10 @@ from collections.abc import Callable
 
 from sqlalchemy.exc import OperationalError
 
+from nonholonomic.analysis.chaos_map import cell_digest, run_cells
 from nonholonomic.analysis.ensemble import digest, run_chunk
 from nonholonomic.integration import IntegrationCancelled
+from schemas.chaos_maps import cell_to_json
 from schemas.ensembles import EnsembleRequest
 from schemas.results import member_to_json
 from store.ensembles import EnsembleStore
@@ -78,6 +80,11 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
 
     try:
         members = request.members_list(start, stop)
+        if request.indicators:
+            cells = run_cells(request.definition(), members, request.t_final, request.map_options(), progress)
+            members_json, digests = [cell_to_json(request.definition(), c) for c in cells], [cell_digest(c) for c in cells]
+            write_until_stored(lambda: store.store_chunk(ensemble_id, chunk, members_json, digests, worker))
+            return "done"
         results = run_chunk(
             request.definition(), members, request.t_final, request.samples, checks=request.checks,
             poincare=request.poincare.options() if request.poincare else None,

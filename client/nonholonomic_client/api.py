@@ -457,6 +457,31 @@ class Client(SymbolicRoutes):
                      direction=str(section.get("direction")))
         return frames.section_frame([(None, section)], result["system"]["units"], attrs)
 
+    def chaos_map(self, ensemble_id: str, format: Literal["xarray", "json", "csv", "netcdf"] = "xarray",  # noqa: A002
+                  out: str | Path | None = None) -> xarray.Dataset | dict[str, Any] | bytes | Path:
+        """A chaos map (an ensemble with ``members.grid``): ``GET /v1/ensembles/{id}/map``.
+
+        ``xarray`` (the ``[notebook]`` extra): a Dataset on the two coordinates with ``status``, each
+        indicator and each integral's drift, equal to the JSON bit for bit; ``json``: the 2-D arrays;
+        ``csv`` or ``netcdf``: the file's bytes (or streamed into ``out``).
+
+        Raises
+        ------
+        ApiError
+            404 for an unknown id, 409 if the ensemble is not a map.
+        """
+        path = f"/v1/ensembles/{ensemble_id}/map"
+        if format in ("csv", "netcdf"):
+            if out is not None:
+                return self._download(path, {"format": format}, out)
+            return self._request("GET", path, params={"format": format}).content
+        if format not in ("json", "xarray"):
+            raise ValueError(f"format must be one of xarray, json, csv, netcdf, not {format!r}")
+        data = self._request("GET", path, params={"format": "json"}).json()
+        if format == "json":
+            return data  # type: ignore[no-any-return]
+        return frames.map_dataset(data, self.ensemble(ensemble_id))
+
     def exponents(self, ident: str, format: Literal["json", "pandas"] = "pandas", *,  # noqa: A002
                   of: Literal["job", "ensemble"] | None = None) -> dict[str, Any] | pandas.DataFrame:
         """The Lyapunov exponents of a job (its spectrum) or of an ensemble (each member's).

@@ -345,3 +345,30 @@ def convergence_frame(lyapunov: Mapping[str, Any]) -> pandas.DataFrame:
                                         name="t"))
     frame.attrs["units"] = {"t": "s", "exponent": "1/s"}
     return frame
+
+
+def map_dataset(data: Mapping[str, Any], view: Mapping[str, Any]) -> xarray.Dataset:
+    """A chaos map's JSON (``GET /v1/ensembles/{id}/map?format=json``) as an ``xarray.Dataset``: dimensions
+    the two coordinates (the cells' centres, with units); ``status`` (words), ``branches``, each indicator
+    and ``drift_<integral>`` (NaN where a cell was not integrated); attrs the summary, thresholds and request."""
+    xr = _xarray()
+    names = list(data["coordinates"])
+    coords = {c: (c, np.asarray(data["axes"][k], dtype=float), {"units": data["units"][c]})
+              for k, c in enumerate(names)}
+
+    def grid(values: Iterable[Iterable[float | None]]) -> np.ndarray:
+        return np.array([[np.nan if v is None else v for v in row] for row in values], dtype=float)
+
+    variables: dict[str, Any] = {"status": (names, np.array(data["status"], dtype=str)),
+                                 "branches": (names, np.array(data["branches"], dtype=np.int64))}
+    for name, values in data["indicators"].items():
+        variables[name] = (names, grid(values))
+    for name, values in data["integral_drift"].items():
+        variables[f"drift_{name}"] = (names, grid(values), {"units": "1"})
+    summary = data.get("summary") or {}
+    attrs = {"ensemble": view.get("id", ""), "summary": json.dumps(summary),
+             "thresholds": json.dumps(summary.get("thresholds", {})),
+             "chaotic_fraction": summary.get("chaotic_fraction") if summary.get("chaotic_fraction") is not None
+             else float("nan"),
+             "request": json.dumps(view.get("request", {}))}
+    return xr.Dataset(variables, coords=coords, attrs=attrs)

@@ -32,6 +32,8 @@ CHUNK_SECONDS = 1.0
 #: per second) and the variational equations with QR every unit of time (~60 ms for t = 400).
 SECONDS_PER_UNIT_TIME = 3e-6
 LYAPUNOV_SECONDS_PER_UNIT_TIME = 1.5e-4
+#: A chaos map's cell: the orbit with one tangent vector (~120 cells of t = 500 per second, batch mode).
+INDICATOR_SECONDS_PER_UNIT_TIME = 1.7e-5
 #: A section adds an event to every step.
 SECTION_FACTOR = 1.5
 MAX_CHUNK_SIZE = 4096
@@ -85,13 +87,16 @@ class MemberResult:
 
 
 def default_chunk_size(system: MechanicalSystem, t_final: float, *, poincare: SectionOptions | None = None,
-                       lyapunov: SpectrumOptions | None = None, lanes: int | None = None) -> int:
+                       lyapunov: SpectrumOptions | None = None, lanes: int | None = None,
+                       indicators: bool = False) -> int:
     """Members per chunk for about :data:`CHUNK_SECONDS` of work, a multiple of ``lanes`` (by default
     heyoka's SIMD batch size, the lanes :func:`~nonholonomic.integration_batch.integrate_batch` fills)."""
     lanes = lanes or hy.recommended_simd_size()
     per_unit_time = SECONDS_PER_UNIT_TIME * (1 + SECTION_FACTOR * (poincare is not None))
     if lyapunov is not None:  # the orbit with its whole tangent matrix, a QR every interval
         per_unit_time += LYAPUNOV_SECONDS_PER_UNIT_TIME * max(1.0, 1.0 / lyapunov.interval)
+    if indicators:
+        per_unit_time = INDICATOR_SECONDS_PER_UNIT_TIME
     cost = per_unit_time * max(t_final, 1e-9) * (system.dimension / 6) ** 2
     size = int(CHUNK_SECONDS / cost)
     return max(lanes, min(MAX_CHUNK_SIZE, size - size % lanes))
@@ -207,7 +212,7 @@ def summarize(digests: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     has the worst drift None, and the exponents' statistics are over the finite ones (``non_finite``
     counts the others)."""
     ok = [d for d in digests if d["status"] == "succeeded"]
-    failed = [d for d in digests if d["status"] != "succeeded"]
+    failed = [d for d in digests if d["status"] == "failed"]
     worst: dict[str, float] = {}
     for d in ok:
         for name, drift in d.get("integral_drift", {}).items():
@@ -218,6 +223,9 @@ def summarize(digests: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "worst_integral_drift": {name: drift if math.isfinite(drift) else None for name, drift in worst.items()},
         "members_with_failed_checks": sum(1 for d in ok if d.get("checks_failed")),
     }
+    outside = sum(1 for d in digests if d["status"] == "outside")
+    if outside:
+        summary["outside"] = outside  # a map's cells where no state of the level crosses the section
     exponents = np.array([d["largest_exponent"] for d in ok if "largest_exponent" in d], dtype=float)
     non_finite = int(np.count_nonzero(~np.isfinite(exponents)))
     exponents = exponents[np.isfinite(exponents)]

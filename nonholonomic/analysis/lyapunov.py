@@ -79,6 +79,7 @@ from nonholonomic.integration import (
     IntegrationError,
     ProgressCallback,
 )
+from nonholonomic.integration_batch import lane_sources
 from nonholonomic.taylor import taylor_system
 
 __all__ = [
@@ -289,10 +290,9 @@ def _batch(system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, t_final: flo
     the batch is run again without it (lanes do not influence each other)."""
     failed: dict[int, IntegrationError] = {}
     while True:
-        healthy = [i for i in range(len(P)) if i not in failed]
-        if not healthy:
+        source = lane_sources(len(P), failed, lanes)
+        if source is None:
             return [failed[i] for i in range(len(P))]
-        source = [i if i in healthy else healthy[-1] for i in range(len(P))] + [healthy[-1]] * (lanes - len(P))
         start = time.perf_counter()
         outcome = _run_lanes(system, P[source], Y0[source], t_final, interval, transient, tol, progress)
         if isinstance(outcome, list):

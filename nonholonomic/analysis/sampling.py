@@ -423,6 +423,13 @@ def _verified(ctx: _Context, states: np.ndarray, values: Mapping[str, float]) ->
     return ok
 
 
+def verified(system: MechanicalSystem, parameters: np.ndarray, states: np.ndarray,
+             values: Mapping[str, float]) -> np.ndarray:
+    """Which rows of ``states`` satisfy every constraint and give the integrals in ``values`` their values,
+    to :data:`TOLERANCE` of their scale (the check every sampled state passes)."""
+    return _verified(_Context(system, np.asarray(parameters, dtype=float), values), states, values)
+
+
 def _unreachable(ctx: _Context, values: Mapping[str, float], tries: int, floors: dict[str, float],
                  energy_low: float, energy_high: float, unverified: int) -> LevelError:
     """The error for a level no tried candidate reached, with what the tried states needed."""

@@ -13,7 +13,7 @@ from schemas.problems import CONFLICT
 from service.access import ensemble_of
 from service.admission import admit_ensemble
 from service.backends import JobBackend
-from service.ensembles import members_page, section_csv, section_netcdf, section_npz, view
+from service.ensembles import all_members, members_page, section_csv, section_netcdf, section_npz, view
 from service.errors import (
     INVALID,
     UNAVAILABLE_BACKEND,
@@ -50,6 +50,8 @@ async def submit_ensemble(body: EnsembleRequest, request: Request) -> JSONRespon
     the event loop); then the chunks go to the workers."""
     chunks = await validated(request, "ensemble", body)
     assert chunks is not None
+    if body.members.grid is not None and body.members.grid.ranges is None:  # resolved once, kept with the request
+        body.members.grid.ranges = [list(r) for r in await run_in_threadpool(body.grid_ranges)]
     spec = body.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
@@ -102,6 +104,35 @@ def get_section(ensemble_id: str, request: Request,
     if format == "npz":
         return download(request, section_npz(store, ensemble_id, record), MEDIA_TYPES[format], filename)
     return download(request, section_netcdf(store, ensemble_id, record), MEDIA_TYPES[format], filename)
+
+
+@router.get("/{ensemble_id}/map", operation_id="ensembles-map", response_class=Response,
+            responses={**download_responses([MEDIA_TYPES["csv"], "application/json", MEDIA_TYPES["netcdf"]],
+                                            "the chaos map: CSV (format=csv), JSON (format=json) or NetCDF-4 "
+                                            "(format=netcdf)"),
+                       **_ERRORS, **problem_responses({409: "the ensemble is not a chaos map", 422: "unknown format"})},
+            summary="A chaos map's cells: status, indicators and integral drift on the grid (CSV, JSON or NetCDF)")
+def get_map(ensemble_id: str, request: Request,
+            format: Literal["csv", "json", "netcdf"] = Query(  # noqa: A002
+                "csv", description="csv (one row per cell: i, j, the coordinates, status, branches, each indicator, "
+                                   "each integral's drift; a header with units), json (2-D arrays [i][j]) or netcdf "
+                                   "(dimensions the two coordinates)")) -> Response:
+    """Cells of unfinished chunks are ``outside`` with empty values until their chunk is done."""
+    from service.map_exports import map_csv, map_json, map_netcdf
+
+    record = _record(request, ensemble_id)
+    if not record["request"].get("indicators"):
+        raise ProblemError(409, "Not a map", "this ensemble is not a chaos map (no members.grid and indicators)",
+                           CONFLICT)
+    store = _backend(request).ensembles
+    members = all_members(store, ensemble_id, record)
+    filename = f"ensemble-{ensemble_id}-map.{SUFFIXES[format]}"
+    if format == "csv":
+        return download(request, map_csv(record, members), MEDIA_TYPES["csv"], filename)
+    summary = view(ensemble_id, record)["summary"]
+    if format == "json":
+        return JSONResponse(map_json(record, members, summary))
+    return download(request, map_netcdf(ensemble_id, record, members, summary), MEDIA_TYPES["netcdf"], filename)
 
 
 @router.delete("/{ensemble_id}", status_code=202, operation_id="ensembles-cancel", response_model=EnsembleView,

@@ -15,7 +15,7 @@ from schemas.problems import CONFLICT
 from schemas.report import REPORT_JOB
 from service.access import ensemble_of, job_of
 from service.backends import JobBackend, JobRecord
-from service.ensembles import members_page, request_units, view
+from service.ensembles import all_members, members_page, request_units, view
 from service.errors import ProblemError, media_responses, problem_responses
 from service.exports import download, download_responses
 from service.pages import render_ensemble, render_job, render_report, render_report_status
@@ -28,7 +28,7 @@ PAGE_MEMBERS = 50
 #: Rendered plots kept in memory (finished jobs and ensembles only).
 PLOT_CACHE_SIZE = 64
 JobPlotName = Literal["trajectory", "integrals", "poincare", "lyapunov"]
-EnsemblePlotName = Literal["poincare", "exponents"]
+EnsemblePlotName = Literal["poincare", "exponents", "map"]
 PlotFormat = Literal["png", "svg"]
 _HTML = media_responses(["text/html"], "the page")
 _IMAGE = download_responses(["image/png", "image/svg+xml"], "the plot (PNG or SVG, as the path's suffix says)")
@@ -135,9 +135,7 @@ def ensemble_page(ensemble_id: str, request: Request) -> HTMLResponse:
 
 
 def _all_members(request: Request, ensemble_id: str, record: dict[str, Any]) -> Iterator[dict[str, Any]]:
-    store = _backend(request).ensembles
-    for i in sorted(record["done"]):
-        yield from store.chunk_members(ensemble_id, i) or []
+    return all_members(_backend(request).ensembles, ensemble_id, record)
 
 
 @router.get("/v1/ensembles/{ensemble_id}/plots/{name}.{fmt}", tags=["ensembles"], operation_id="ensembles-plot",
@@ -145,7 +143,7 @@ def _all_members(request: Request, ensemble_id: str, record: dict[str, Any]) -> 
             responses={**_IMAGE, **problem_responses({404: "unknown ensemble id",
                                                       409: "no member done yet, or no such analysis asked for",
                                                       422: "unknown plot name or format"})},
-            summary="A plot of an ensemble (matplotlib): every member's poincare points, or the exponents")
+            summary="A plot of an ensemble (matplotlib): every member's poincare points, the exponents, or a chaos map")
 def ensemble_plot_route(ensemble_id: str, name: EnsemblePlotName, fmt: PlotFormat, request: Request) -> Response:
     """Drawn from the members of the chunks done so far; cached by that set of chunks."""
     record = _ensemble(request, ensemble_id)

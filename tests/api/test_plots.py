@@ -288,7 +288,10 @@ def test_ensemble_section_and_exponents(client):
     assert len(drawn.get_offsets()) == sum(m["poincare"]["count"] for m in members)
     assert sorted(set(drawn.get_array().tolist())) == [m["index"] for m in members if m["poincare"]["count"]]
     assert drawn.get_rasterized() and ax.get_xlabel() == "γ₁ [1]"
-    for name in plots.ENSEMBLE_PLOTS:
+    assert plots.ENSEMBLE_PLOTS == ("poincare", "exponents", "map")  # a map's: tests/api/test_chaos_maps_api.py
+    with pytest.raises(PlotUnavailable, match="not a chaos map"):
+        ensemble_plot("map", view, iter(members), "png")
+    for name in ("poincare", "exponents"):
         assert _png_size(ensemble_plot(name, view, iter(members), "png"))[0] > 100
         texts = _svg_texts(ensemble_plot(name, view, members, "svg"))
         assert "chaplygin_ball" in texts and ("γ₂ [1]" in texts if name == "poincare" else "[1/s]" in texts)
@@ -296,7 +299,7 @@ def test_ensemble_section_and_exponents(client):
     assert sum(p.get_height() for p in histogram.patches) == len(members)
 
     no_analysis = [{k: v for k, v in m.items() if k not in ("poincare", "lyapunov")} for m in members]
-    for name in plots.ENSEMBLE_PLOTS:
+    for name in ("poincare", "exponents"):
         with pytest.raises(PlotUnavailable, match="no member"):
             ensemble_plot(name, view, no_analysis, "png")
 

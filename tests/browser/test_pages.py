@@ -230,6 +230,28 @@ def test_ensemble_page_shows_summary_members_and_plots(api, browser):
     visit.finish("ensemble", api)
 
 
+def test_a_chaos_maps_page_shows_the_map_its_summary_and_its_exports(api, browser):
+    body = {"system": BALL, "t_final": 200.0, "indicators": ["megno", "fli"],
+            "members": {"grid": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
+                                 "level": {"energy": 2.0, "area": 0.0}, "shape": [32, 24]}}}
+    location = _submit(api, "/v1/ensembles", body)
+    ensemble = _wait_ensemble(api, location)
+    assert ensemble["status"] == "succeeded", ensemble
+    visit = Visit(browser, f"{api}{location}/page")
+    page = visit.page
+    summary = page.locator("#map-summary").inner_text()
+    m = ensemble["summary"]["map"]
+    assert f"{m['regular']} regular" in summary and f"{m['chaotic']} chaotic" in summary, summary
+    assert "independent recomputation" in summary
+    images = visit.images_loaded()
+    assert [src.split("/")[-1] for src, _ in images] == ["map.png"] and images[0][1] > 800, images
+    links = page.eval_on_selector_all("#links a", "els => els.map(e => e.getAttribute('href'))")
+    for fmt in ("csv", "json", "netcdf"):
+        assert f"{location}/map?format={fmt}" in links
+    assert page.locator("#cells tr").count() > 1
+    visit.finish("chaos-map", api)
+
+
 def test_report_page_shows_every_claim_with_its_verdict(api, browser):
     location = _submit(api, "/v1/paper/report", {"claims": REPORT_CLAIMS})
     with httpx.Client(base_url=api, timeout=30) as client:

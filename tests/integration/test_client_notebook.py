@@ -140,6 +140,24 @@ def test_an_ensembles_section_members_and_exponents_as_tables(api, ensemble):
     assert (exponents["exponent_1"] >= exponents["exponent_2"]).all()
 
 
+def test_a_chaos_map_as_an_xarray_dataset_equals_the_json_bit_for_bit(api):
+    body = {"system": JOB["system"], "t_final": 100.0, "indicators": ["megno", "lyapunov"],
+            "members": {"grid": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
+                                 "level": {"energy": 2.0, "area": 0.0}, "shape": [9, 7]}}}
+    ensemble_id = api.submit_ensemble(body)
+    api.wait_ensemble(ensemble_id, timeout=180, poll=0.05)
+    data = api.chaos_map(ensemble_id, format="json")
+    ds = api.chaos_map(ensemble_id)
+    assert ds["megno"].dims == ("gamma1", "M3") and ds.sizes == {"gamma1": 9, "M3": 7}
+    assert ds["M3"].attrs["units"] == "kg m^2/s"
+    megno = np.array([[np.nan if v is None else v for v in row] for row in data["indicators"]["megno"]])
+    assert np.array_equal(ds["megno"].values, megno, equal_nan=True)
+    assert ds["status"].values.tolist() == data["status"]
+    assert json.loads(ds.attrs["summary"]) == data["summary"] and ds.attrs["chaotic_fraction"] == \
+        data["summary"]["chaotic_fraction"]
+    assert api.chaos_map(ensemble_id, format="csv").startswith(b"i,j,gamma1 [1],M3 [kg m^2/s],status")
+
+
 def test_a_jobs_spectrum_and_its_convergence(api, job):
     lyapunov = api.exponents(job, format="json")
     spectrum = api.exponents(job)
@@ -191,7 +209,7 @@ print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r
                          cwd=tmp_path, env={**os.environ, "NONHOLONOMIC_URL": base})
     assert run.returncode == 0, run.stderr[-3000:]
     done = [line for line in run.stdout.splitlines() if line.endswith(".ipynb")]  # each one's name, once run
-    assert done == [p.name for p in sorted((ROOT / "docs" / "tutorials").glob("*.ipynb"))] and len(done) == 6, done
+    assert done == [p.name for p in sorted((ROOT / "docs" / "tutorials").glob("*.ipynb"))] and len(done) == 7, done
     cli = env_dir / "bin" / "nonholonomic"
     systems = subprocess.run([str(cli), "--url", base, "systems"], capture_output=True, text=True, timeout=60,
                              check=False, cwd=tmp_path)

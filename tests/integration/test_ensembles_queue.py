@@ -133,3 +133,33 @@ def test_a_worker_process_killed_mid_chunk_loses_no_member_and_counts_none_twice
     assert [m["index"] for m in members] == list(range(16))
     assert all(m["status"] == "succeeded" for m in members)
     assert view["summary"]["members"] == 16  # ... and was counted once
+
+
+def test_a_chaos_map_fans_out_over_both_processes_with_the_numbers_of_the_core(stack):
+    """The ball in a linear field, 16 x 12 cells in chunks of 24 over the worker's two processes: each cell's
+    indicators equal the core's, computed here from the same request (lanes are independent)."""
+    from nonholonomic.analysis.chaos_map import run_cells
+    from schemas.ensembles import EnsembleRequest
+
+    client, _, _ = stack
+    body = {"system": {**BALL, "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}}, "t_final": 150.0,
+            "chunk_size": 24, "indicators": ["fli", "megno"],
+            "members": {"grid": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
+                                 "level": {"energy": 2.0, "area": 0.0}, "shape": [16, 12]}}}
+    r = client.post("/v1/ensembles", json=body)
+    assert r.status_code == 202, r.text
+    assert r.json()["chunks"] == 8
+    view = poll_job(client, r.headers["location"], 300)
+    assert view["status"] == "succeeded" and sum(view["chunks"]["workers"].values()) == 8
+    summary = view["summary"]["map"]
+    assert summary["status_by"] == "fli" and 0.1 < summary["chaotic_fraction"] < 0.9 and summary["failed"] == 0
+    request = EnsembleRequest.model_validate(view["request"])  # with the ranges resolved at submission
+    cells = {c.index: c for c in run_cells(request.definition(), request.members_list(0, 96), 150.0,
+                                           request.map_options())}
+    members = _all_members(client, view["id"])
+    assert [m["index"] for m in members] == list(range(192))
+    for m in members[:96]:
+        c = cells[m["index"]]
+        assert m["cell"]["status"] == c.status
+        if c.values:
+            assert m["cell"]["indicators"] == pytest.approx(dict(c.values), rel=1e-12)
