@@ -29,7 +29,7 @@ TORUS_ENERGY, TORUS_AREA = 0.5, 0.0
 
 #: x2 = 0 (the plane of the longest and the shortest axis), x2 increasing: crossed by every orbit
 #: seen (x3 = 0 misses orbits that circle one pole). Chart: θ = atan2(x3/√b3, x1/√b1) and ω2, one
-#: sheet per sign of a = (ω, n) (never seen to change on an orbit).
+#: sheet per sign of a = (ω, n) (a changes sign on orbits from θ0 ≈ −1.0 … −0.75: bench/science_layer.py).
 JACOBI_SECTION = {"surface": "x2", "value": 0.0, "direction": "increasing", "coordinates": ["x3", "omega2"],
                   "max_points": 100000}
 #: γ3 = 0 increasing. Chart: φ = atan2(γ2, γ1) and M3 (the increasing branch is single-valued in them).

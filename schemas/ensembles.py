@@ -29,6 +29,8 @@ from schemas.settings import get_settings
 from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step
 
 ENSEMBLE_JOB = "ensemble"
+#: Cells of a map completed at validation (evenly spread; the chunks complete every one).
+VALIDATED_CELLS = 256
 _PATH = re.compile(r"^(?:potential\.)?([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
 
 
@@ -69,6 +71,10 @@ class GridMembers(BaseModel):
     shape: list[int] = Field(min_length=2, max_length=2, description="cells along each coordinate (1 .. 512)")
     ranges: list[list[FiniteFloat]] | None = Field(None, description="[[lo, hi], [lo, hi]] of the coordinates; by "
                                                                      "default the region the level allows")
+    sheet: str | None = Field(None, max_length=500,
+                              description="an expression in the state; of a cell's states on the level, those where "
+                                          "it is > 0 (e.g. the Jacobi problem's a = (omega, n) > 0: "
+                                          "'x1*omega1 + x3*omega3/3' on x2 = 0 with B = (1, 2, 3))")
 
     @field_validator("shape")
     @classmethod
@@ -88,7 +94,7 @@ class GridMembers(BaseModel):
         return Grid(self.surface, self.value, (self.coordinates[0], self.coordinates[1]), dict(self.level),
                     (self.shape[0], self.shape[1]),
                     None if self.ranges is None else (tuple(self.ranges[0]), tuple(self.ranges[1])),  # type: ignore[arg-type]
-                    self.direction)
+                    self.direction, self.sheet)
 
 
 class MembersSpec(BaseModel):
@@ -200,7 +206,9 @@ class EnsembleRequest(BaseModel):
     def expressions(self) -> list[tuple[str, str]]:
         """Every expression the user wrote, by field path: the system's and the surface."""
         found = self.system.expressions()  # type: ignore[attr-defined]
-        return found + ([("poincare.surface", self.poincare.surface)] if self.poincare is not None else [])
+        grid = self.members.grid
+        return (found + ([("poincare.surface", self.poincare.surface)] if self.poincare is not None else [])
+                + ([("members.grid.sheet", grid.sheet)] if grid is not None and grid.sheet else []))
 
     def problems(self, step: Step = no_step) -> list[FieldProblem]:
         """Everything wrong with the request, each member's state included, before anything is queued
@@ -278,6 +286,15 @@ class EnsembleRequest(BaseModel):
                                               f"{p.reason} (with {spec.sweep.parameter} = {value:g})"))
                 if len(found) >= 20:
                     break
+        elif spec.grid is not None:  # a sample of the cells, spread over the grid: a grid's problems are structural
+            try:
+                cells = np.unique(np.linspace(0, spec.count - 1, min(spec.count, VALIDATED_CELLS)).round().astype(int))
+                complete(system, parameter_vector(system, self.system.parameter_values()),  # type: ignore[attr-defined]
+                         spec.grid.grid(), self.grid_ranges(system), indices=cells)
+            except LevelProblem as exc:
+                found.append(FieldProblem(exc.field, exc.reason))
+            except GridError as exc:
+                found.append(FieldProblem(f"members.grid.{exc.field}", exc.reason))
         else:
             try:
                 self.members_list(0, spec.count)

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from service.plot_ensemble import _ensemble_system
 from service.plots import PlotUnavailable, _axis_label, _headline, _new_figure
@@ -51,6 +52,7 @@ def map_figure(view: Mapping[str, Any], members: Iterable[Mapping[str, Any]]) ->
         bar = fig.colorbar(image, ax=ax, extend="both", label=f"{word} [{unit}]")
         if name in thresholds and vmin < thresholds[name] < vmax:
             bar.ax.axhline(thresholds[name], color="c", linewidth=2)
+        ax.xaxis.set_major_locator(MaxNLocator(5))  # a zoomed axis has long tick labels
         ax.set_xlabel(_axis_label(arrays.coordinates[0], units))
         ax.set_ylabel(_axis_label(arrays.coordinates[1], units))
         ax.set_title(f"{word}" + (f" (chaotic above {thresholds[name]:.3g}: the cyan mark)" if name in thresholds

@@ -33,7 +33,9 @@ import numpy as np
 
 from nonholonomic.analysis.sampling import RECIPES, LevelError, fixable, on_level, verified
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.kernels import NumericSystem, numeric
+from nonholonomic.analysis.grid_velocity import VelocityError, quadratic_roots, velocities
+from nonholonomic.analysis.poincare_surface import SurfaceError, parse_surface
+from nonholonomic.kernels import NumericSystem, numeric, vectorize
 
 #: States drawn on the level to estimate the region it allows (the default ``ranges``).
 RANGE_SAMPLES = 20000
@@ -66,6 +68,7 @@ class Grid:
     shape: tuple[int, int]
     ranges: tuple[tuple[float, float], tuple[float, float]] | None = None
     direction: str = "increasing"
+    sheet: str | None = None
 
     @property
     def cells(self) -> int:
@@ -126,7 +129,7 @@ class _Plan:
     positions: tuple[tuple[int, int | None], ...]   # (constraint index, its free component or None)
     velocity: tuple[int, ...]         # the velocity vector's components
     free_velocity: tuple[int, ...]
-    linear: tuple[tuple[str, int], ...]   # ("constraint" | "integral", index): equations linear in v
+    relations: tuple[tuple[str, int], ...]   # ("constraint" | "integral", index): relations of the velocity
     surface: int
 
 
@@ -184,16 +187,37 @@ def plan(system: MechanicalSystem, grid: Grid) -> _Plan:
         if loose:
             raise GridError("coordinates", f"nothing fixes {', '.join(str(system.state_symbols[k]) for k in loose)} "
                                            "on the section: choose coordinates that do")
-    linear = tuple([("constraint", c) for c, con in enumerate(system.constraints) if con.field == velocity_name]
+    relations = tuple([("constraint", c) for c, con in enumerate(system.constraints) if con.field == velocity_name]
                    + [("integral", [i.name for i in system.integrals].index(name))
                       for name in grid.level if name != "energy"])
     free_velocity = tuple(k for k in velocity if k not in idx)
-    if len(free_velocity) - len(linear) != 1:
+    if len(free_velocity) - len(relations) != 1:
         raise GridError("coordinates", f"{velocity_name} keeps {len(free_velocity)} free components and "
-                                       f"{len(linear)} linear relations (constraints and the level's integrals "
-                                       "other than the energy): a cell needs a line of velocities for the energy "
-                                       "to fix; fix more of the level or choose other coordinates")
-    return _Plan(tuple(idx), tuple(positions), velocity, free_velocity, linear, idx[0])
+                                       f"{len(relations)} relations (constraints and the level's integrals "
+                                       "other than the energy): a cell needs one velocity direction more than "
+                                       "relations, for the energy to fix; fix more of the level or choose other "
+                                       "coordinates")
+    if grid.sheet is not None:
+        _sheet(system, grid.sheet)
+    return _Plan(tuple(idx), tuple(positions), velocity, free_velocity, relations, idx[0])
+
+
+def _sheet(system: MechanicalSystem, text: str | None):  # type: ignore[no-untyped-def]
+    """The kernel of the ``sheet`` expression (the cells' states are those where it is > 0), or None.
+
+    Raises
+    ------
+    GridError
+        ``sheet``: a parse error or an unknown name (the safe parser of the sections' surfaces).
+    """
+    if text is None:
+        return None
+    try:
+        expr = parse_surface(system, text)
+    except SurfaceError as exc:
+        where = f" (at position {exc.position})" if exc.position is not None else ""
+        raise GridError("sheet", exc.reason + where) from None
+    return vectorize([expr], list(system.state_symbols) + list(system.parameter_symbols))
 
 
 def default_ranges(system: MechanicalSystem, p: np.ndarray, grid: Grid) -> tuple[tuple[float, float], ...]:
@@ -219,8 +243,9 @@ def default_ranges(system: MechanicalSystem, p: np.ndarray, grid: Grid) -> tuple
 
 
 def complete(system: MechanicalSystem, p: np.ndarray, grid: Grid, ranges: Sequence[Sequence[float]],
-             start: int = 0, stop: int | None = None) -> Cells:
-    """Cells ``start .. stop − 1`` of ``grid`` completed to states on its level (module docstring).
+             start: int = 0, stop: int | None = None, indices: np.ndarray | None = None) -> Cells:
+    """Cells ``start .. stop − 1`` (or the cells ``indices``) of ``grid`` completed to states on its level
+    (module docstring).
 
     Raises
     ------
@@ -229,7 +254,7 @@ def complete(system: MechanicalSystem, p: np.ndarray, grid: Grid, ranges: Sequen
     """
     how = plan(system, grid)
     stop = grid.cells if stop is None else stop
-    k = np.arange(start, stop)
+    k = np.arange(start, stop) if indices is None else np.asarray(indices, dtype=int)
     u, v = axes(grid, ranges)
     values = np.column_stack([u[k // grid.shape[1]], v[k % grid.shape[1]]])
     base = np.zeros((len(k), system.dimension))
@@ -237,6 +262,7 @@ def complete(system: MechanicalSystem, p: np.ndarray, grid: Grid, ranges: Sequen
     base[:, how.fixed[1]] = values[:, 0]
     base[:, how.fixed[2]] = values[:, 1]
     kern = numeric(system)
+    sheet = _sheet(system, grid.sheet)
     with np.errstate(all="ignore"):
         roots = [_position_roots(kern, p, system, base, c, free) for c, free in how.positions]
     best = np.full((len(k), system.dimension), np.nan)
@@ -252,15 +278,21 @@ def complete(system: MechanicalSystem, p: np.ndarray, grid: Grid, ranges: Sequen
             else:
                 states[:, free] = candidates[pick]
                 ok &= np.isfinite(candidates[pick])
-        with np.errstate(all="ignore"):
-            line = _velocity_line(kern, p, system, how, states, targets)
-        for t in line:
+        try:
+            with np.errstate(all="ignore"):
+                found = velocities(kern, p, system, how.relations, how.free_velocity, states, targets)
+        except VelocityError as exc:
+            raise GridError("level", str(exc)) from None
+        for t in found:
             trial = states.copy()
             trial[:, list(how.free_velocity)] = t
             good = ok & np.all(np.isfinite(trial), axis=1)
             with np.errstate(all="ignore"):
                 rate = kern.rhs(np.where(good[:, None], trial, 0.0), p)[:, how.surface]
             good &= sign * rate > 0
+            if sheet is not None:
+                with np.errstate(all="ignore"):
+                    good &= sheet(np.where(good[:, None], trial, 0.0), p)[:, 0] > 0
             good &= verified(system, p, np.where(good[:, None], trial, 0.0), targets)
             take = good & (branches == 0)
             best[take] = trial[take]
@@ -296,73 +328,5 @@ def _position_roots(kern: NumericSystem, p: np.ndarray, system: MechanicalSystem
     else:
         raise GridError("coordinates", f"{constraint.formula} is not of degree <= 2 in "
                                        f"{system.state_symbols[free]}: a map cannot complete it")
-    plus, minus = _quadratic_roots(a0, a1, a2)
+    plus, minus = quadratic_roots(a0, a1, a2)
     return free, [plus, minus]
-
-
-def _quadratic_roots(c0: np.ndarray, c1: np.ndarray, c2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Both real roots of c0 + c1 t + c2 t² (the larger first; NaN where none), stably."""
-    disc = c1 * c1 - 4 * c2 * c0
-    root = np.sqrt(np.where(disc >= 0, disc, np.nan))
-    q = -(c1 + np.where(c1 >= 0, 1.0, -1.0) * root) / 2
-    with np.errstate(all="ignore"):
-        r1 = np.where(c2 != 0, q / c2, np.where(c1 != 0, -c0 / c1, np.nan))
-        r2 = np.where(q != 0, c0 / q, np.where(c2 != 0, r1, np.nan))
-    return np.fmax(r1, r2), np.fmin(r1, r2)
-
-
-def _velocity_line(kern: NumericSystem, p: np.ndarray, system: MechanicalSystem, how: _Plan, states: np.ndarray,
-                   targets: Mapping[str, float]) -> list[np.ndarray]:
-    """The free velocity components at both roots of the energy on the line the linear relations leave
-    (a list of two arrays of shape ``(cells, free)``)."""
-    free = list(how.free_velocity)
-    n = len(free)
-
-    def relations(x: np.ndarray) -> np.ndarray:
-        cols = []
-        cons = ints = None
-        for kind, i in how.linear:
-            if kind == "constraint":
-                cons = kern.constraints(x, p) if cons is None else cons
-                cols.append(cons[:, i] - system.constraints[i].value)
-            else:
-                ints = kern.integrals(x, p) if ints is None else ints
-                cols.append(ints[:, i] - targets[system.integrals[i].name])
-        return np.column_stack(cols) if cols else np.zeros((len(x), 0))
-
-    zero = states.copy()
-    zero[:, free] = 0.0
-    r0 = relations(zero)
-    G = np.empty((len(states), r0.shape[1], n))
-    for j, k in enumerate(free):
-        unit = zero.copy()
-        unit[:, k] = 1.0
-        G[:, :, j] = relations(unit) - r0
-        unit[:, k] = 2.0
-        bent = relations(unit) - r0 - 2 * G[:, :, j]
-        scale = np.maximum(1.0, np.abs(G[:, :, j]))
-        if np.any(np.abs(bent) > 1e-9 * scale):
-            raise GridError("level", f"a relation of the level is not linear in {system.state_symbols[k]}: a map "
-                                     "fixes the energy and integrals linear in the velocity")
-    bad = ~(np.all(np.isfinite(G), axis=(1, 2)) & np.all(np.isfinite(r0), axis=1))
-    G[bad], r0[bad] = 1.0, 0.0  # cells whose position has no root: any finite stand-in, NaN again below
-    if r0.shape[1]:
-        _, _, vt = np.linalg.svd(G)
-        direction = vt[:, -1, :]
-        particular = -np.einsum("cij,cj->ci", np.linalg.pinv(G), r0)
-    else:
-        direction = np.ones((len(states), 1))
-        particular = np.zeros((len(states), 1))
-    energy = [i.name for i in system.integrals].index("energy")
-
-    def e(t: float) -> np.ndarray:
-        trial = zero.copy()
-        trial[:, free] = particular + t * direction
-        return kern.integrals(trial, p)[:, energy]
-
-    e0, plus, minus = e(0.0), e(1.0), e(-1.0)
-    c2 = (plus + minus) / 2 - e0
-    c1 = (plus - minus) / 2
-    t1, t2 = _quadratic_roots(e0 - targets["energy"], c1, c2)
-    t1[bad] = t2[bad] = np.nan
-    return [particular + t1[:, None] * direction, particular + t2[:, None] * direction]

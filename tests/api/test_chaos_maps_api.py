@@ -102,6 +102,7 @@ def test_the_linear_field_shows_its_chaotic_sea_and_the_exports_carry_the_member
     ({"indicators": ["megno"], "thresholds": {"fli": 3.0}}, "body", "thresholds for indicators not asked for"),
     ({"lyapunov": {"count": 1}}, "body", "leave out poincare and lyapunov"),
     ({"members": {"grid": {**GRID, "level": {"energy": -5.0, "area": 0.0}}}}, "members.grid.level", "energy"),
+    ({"members": {"grid": {**GRID, "sheet": "gamma9 + 1"}}}, "members.grid.sheet", "gamma9"),
 ])
 def test_a_bad_map_is_refused_with_the_field_and_the_reason(client, change, field, words):
     body = chaos_map(BALL)
@@ -113,6 +114,22 @@ def test_a_bad_map_is_refused_with_the_field_and_the_reason(client, change, fiel
     assert r.headers["content-type"].startswith("application/problem+json")
     errors = r.json()["errors"]
     assert any(e["field"].startswith(field) and words in e["reason"] for e in errors), errors
+
+
+def test_the_jacobi_problems_map_on_its_two_integrals_with_one_sheet(client):
+    """The level (H, K) fixes omega up to the common points of two conics; the sheet a = (omega, n) > 0."""
+    body = {"system": {"kind": "ball_on_quadric", "D0": 0.036, "m": 1.0, "R": 0.3, "B": [1.0, 2.0, 3.0]},
+            "members": {"grid": {"surface": "x2", "coordinates": ["x3", "omega2"], "level": {"energy": 0.5, "K": 2.0},
+                                 "shape": [8, 6], "sheet": "x1*omega1 + x3*omega3/3"}},
+            "t_final": 100.0, "indicators": ["megno"]}
+    view, members = run(client, body)
+    m = view["summary"]["map"]
+    assert m["failed"] == 0 and m["regular"] + m["chaotic"] >= 20
+    for c in members:
+        if c["status"] == "succeeded":
+            x, w = np.array(c["initial_state"]["x"]), np.array(c["initial_state"]["omega"])
+            assert x[1] == 0.0 and w @ (x / [1.0, 2.0, 3.0]) > 0 and c["label"]["branches"] == 2
+            assert c["cell"]["integral_drift"]["K"] < 1e-12
 
 
 def test_an_ensemble_that_is_not_a_map_has_no_map(client):

@@ -231,9 +231,9 @@ def test_ensemble_page_shows_summary_members_and_plots(api, browser):
 
 
 def test_a_chaos_maps_page_shows_the_map_its_summary_and_its_exports(api, browser):
-    body = {"system": BALL, "t_final": 200.0, "indicators": ["megno", "fli"],
+    body = {"system": BALL, "t_final": 150.0, "indicators": ["megno", "fli"],
             "members": {"grid": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
-                                 "level": {"energy": 2.0, "area": 0.0}, "shape": [32, 24]}}}
+                                 "level": {"energy": 2.0, "area": 0.0}, "shape": [24, 18]}}}
     location = _submit(api, "/v1/ensembles", body)
     ensemble = _wait_ensemble(api, location)
     assert ensemble["status"] == "succeeded", ensemble

@@ -75,7 +75,9 @@ def test_the_default_ranges_are_the_levels_extent():
     (Grid("gamma3", 0.0, ("gamma3", "M3"), LEVEL, (2, 2)), "coordinates", "three different components"),
     (Grid("M3", 0.0, ("M1", "M2"), LEVEL, (2, 2)), "coordinates", "3 free components"),
     (Grid("gamma3", 0.0, ("gamma1", "M3"), {"area": 0.0}, (2, 2)), "level.energy", "required"),
-    (Grid("gamma3", 0.0, ("gamma1", "gamma2"), {"energy": 2.0}, (2, 2)), "coordinates", "a line of velocities"),
+    (Grid("gamma3", 0.0, ("gamma1", "gamma2"), {"energy": 2.0}, (2, 2)), "coordinates",
+     "one velocity direction more than relations"),
+    (Grid("gamma3", 0.0, ("gamma1", "M3"), LEVEL, (2, 2), sheet="M1 +* 2"), "sheet", "invalid syntax (at position"),
 ])
 def test_a_grid_that_does_not_fix_a_state_is_refused_naming_the_field(grid, field, words):
     system, _ = ball("zero")
@@ -84,13 +86,11 @@ def test_a_grid_that_does_not_fix_a_state_is_refused_naming_the_field(grid, fiel
     assert err.value.field == field and words in err.value.reason
 
 
-def test_a_level_quadratic_in_the_velocity_is_refused():
+def test_a_quadratic_level_with_too_many_velocity_directions_is_refused():
     system = get_system("ball_on_quadric", "zero")
-    p = parameter_vector(system, {"D0": 0.036, "m": 1.0, "R": 0.3, "B": [1.0, 2.0, 3.0]})
-    grid = Grid("x2", 0.0, ("x3", "omega2"), {"energy": 0.5, "K": 2.0}, (2, 2))
     with pytest.raises(GridError) as err:
-        complete(system, p, grid, ((-1.0, 1.0), (-1.0, 1.0)))
-    assert err.value.field == "level" and "not linear" in err.value.reason
+        plan(system, Grid("x2", 0.0, ("x3", "x1"), {"energy": 0.5, "K": 2.0}, (2, 2)))
+    assert err.value.field == "coordinates" and "3 free components and 1 relations" in err.value.reason
 
 
 def _cells(potential: str, shape=(6, 6)):
@@ -192,3 +192,47 @@ def test_cells_are_classified_and_a_sample_is_recomputed_independently():
     assert 0.1 < summary["chaotic_fraction"] < 0.9
     checked = [r for r in results if r.check is not None]
     assert len(checked) == len([k for k in checked_cells(100) if cells.inside[k]])
+
+
+def test_a_level_with_a_quadratic_integral_cells_meet_both_conics_and_the_sheet():
+    """The Jacobi problem on (H, K) = (0.5, 2) (eqs. 2804-2, 2804-4): K is quadratic in omega, so each cell's
+    omega is a common point of two conics. A cell on study 1's symmetric line equals the state built by
+    bench/science_geometry.jacobi_state (w + a n with |w| from K, a from H: other formulas) to 1e-12; the
+    sheet a = (omega, n) > 0 halves the branches."""
+    import importlib.util
+    import math
+    import sys
+    from pathlib import Path
+
+    bench = Path(__file__).resolve().parents[2] / "bench"
+    path = bench / "science_geometry.py"
+    sys.path.insert(0, str(bench))  # it imports science_config
+    spec = importlib.util.spec_from_file_location("science_geometry_for_maps", path)
+    geometry = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = geometry
+    try:
+        spec.loader.exec_module(geometry)
+    finally:
+        sys.path.remove(str(bench))
+
+    jacobi = {"kind": "ball_on_quadric", "D0": 0.036, "m": 1.0, "R": 0.3, "B": [1.0, 2.0, 3.0]}
+    system = get_system("ball_on_quadric", "zero")
+    p = parameter_vector(system, {k: v for k, v in jacobi.items() if k != "kind"})
+    level = {"energy": 0.5, "K": 2.0}
+    sheet = "x1*omega1 + x3*omega3/3"
+    both = complete(system, p, Grid("x2", 0.0, ("x3", "omega2"), level, (16, 16)), ((-1.7, 1.7), (-4.0, 4.0)))
+    one = complete(system, p, Grid("x2", 0.0, ("x3", "omega2"), level, (16, 16), sheet=sheet),
+                   ((-1.7, 1.7), (-4.0, 4.0)))
+    assert set(np.unique(both.branches)) <= {0, 4} and np.array_equal(one.branches, both.branches // 2)
+    X = one.states[one.inside]
+    assert len(X) > 50
+    assert_on_level(system, p, X, level)
+    n = X[:, :3] / np.array([1.0, 2.0, 3.0])
+    assert np.all(np.sum(X[:, 3:] * n, axis=1) > 0) and np.all(X[:, 0] >= 0)  # a > 0, and x1 >= 0 first
+    for theta in (-0.33591693492, 0.3, -0.9):
+        x3 = math.sqrt(3.0) * math.sin(theta)
+        cell = complete(system, p, Grid("x2", 0.0, ("x3", "omega2"), level, (1, 1), sheet=sheet),
+                        ((x3 - 1e-3, x3 + 1e-3), (-1e-3, 1e-3)))
+        expected = geometry.jacobi_state(theta, 0.0, 0.5, 2.0, jacobi)
+        assert cell.branches[0] == 2
+        assert np.allclose(cell.states[0], expected["x"] + expected["omega"], rtol=0, atol=1e-12)
