@@ -118,17 +118,18 @@ def part_a(cells: int, T: float) -> None:
     print(f"A. {len(X)} cells of the ball in a linear field, t = {T:g}, {lanes} SIMD lanes, one process")
     start = time.perf_counter()
     hand = hand_written(lanes, tol)
-    indicators.batch_template(system, tol, lanes)
+    work = max(len(X) * T, indicators.COMPACT_BELOW)  # a large map's mode (non-compact), like the hand-written one
+    indicators.batch_template(system, tol, lanes, indicators.compact_for(work))
     print(f"   compile (hand + core, or read from heyoka's cache): {time.perf_counter() - start:.1f} s")
     hand_run(hand, X[:lanes], 1.0)  # warm (and Benettin's integrator compiled for the check)
-    indicators.run_batch(system, P[:lanes], X[:lanes], 1.0)
+    indicators.run_batch(system, P[:lanes], X[:lanes], 1.0, work=work)
     run_cells(system, [Member(k, p, X[k], {}) for k in range(lanes)], 1.0,
               MapOptions(("megno",), indicators.default_thresholds(1.0), 1))
     start = time.perf_counter()
     megno_hand = hand_run(hand, X, T)
     t_hand = time.perf_counter() - start
     start = time.perf_counter()
-    found = indicators.run_batch(system, P, X, T)
+    found = indicators.run_batch(system, P, X, T, work=work)
     t_core = time.perf_counter() - start
     members = [Member(k, p, X[k], {}) for k in range(len(X))]
     options = MapOptions(("megno", "fli"), indicators.default_thresholds(T), len(X))

@@ -36,6 +36,7 @@ def cell_to_json(system: MechanicalSystem, cell: CellResult) -> dict[str, Any]:
     if cell.values:
         block["indicators"] = dict(cell.values)
         block["integral_drift"] = dict(cell.integral_drift)
+        block["integrals_failed"] = list(cell.drift_failed)
         block["steps"] = cell.steps
     if cell.check is not None:
         block["check"] = dict(cell.check)

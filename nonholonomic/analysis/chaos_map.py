@@ -63,6 +63,7 @@ class CellResult:
     steps: int = 0
     error: str | None = None
     check: Mapping[str, Any] | None = None
+    drift_failed: tuple[str, ...] = ()
 
 
 def checked_cells(cells: int) -> frozenset[int]:
@@ -92,7 +93,8 @@ def run_cells(system: MechanicalSystem, members: Sequence[Member], t_final: floa
         Y0 = np.array([m.initial_state for m in inside])
         found = dict(zip([m.index for m in inside],
                          indicators.run_batch(system, P, Y0, t_final, tolerance=options.tolerance,
-                                              progress=phase(progress, 0.0, share))))
+                                              progress=phase(progress, 0.0, share), work=options.cells * t_final)))
+    limit = indicators.integral_limit(options.tolerance)
     out = []
     for m in members:
         outcome = found.get(m.index)
@@ -104,8 +106,9 @@ def run_cells(system: MechanicalSystem, members: Sequence[Member], t_final: floa
         else:
             values = {name: outcome.value(name) for name in options.indicators}
             values.setdefault("lyapunov", outcome.lyapunov)
+            drifted = tuple(name for name, d in outcome.integral_drift.items() if not d <= limit)
             out.append(CellResult(m.index, m.label, m.initial_state, classify(values, options), values,
-                                  outcome.integral_drift, outcome.steps))
+                                  outcome.integral_drift, outcome.steps, drift_failed=drifted))
     by_index = {c.index: i for i, c in enumerate(out)}
     for k, m in enumerate(to_check):
         cell = out[by_index[m.index]]
@@ -131,7 +134,7 @@ def _checked(system: MechanicalSystem, member: Member, cell: CellResult, t_final
         check = {"method": "benettin", "largest_exponent": exponent, "map_exponent": cell.values["lyapunov"],
                  "status": status, "agrees": status == cell.status}
     return CellResult(cell.index, cell.label, cell.initial_state, cell.status, cell.values, cell.integral_drift,
-                      cell.steps, cell.error, check)
+                      cell.steps, cell.error, check, cell.drift_failed)
 
 
 def cell_digest(cell: CellResult) -> dict[str, Any]:
@@ -141,7 +144,7 @@ def cell_digest(cell: CellResult) -> dict[str, Any]:
     if cell.values:
         out["indicators"] = dict(cell.values)
         out["integral_drift"] = dict(cell.integral_drift)
-        out["checks_failed"] = []
+        out["checks_failed"] = list(cell.drift_failed)
     if cell.error:
         out["error"] = cell.error
     if cell.check is not None:

@@ -11,13 +11,15 @@ components; the others follow from the system's own constraints and integrals, a
    constraint itself or its square; checked at two more points): both real roots are candidates.
    A position vector with every component fixed must already satisfy its constraint.
 2. The velocity ``v``: the constraints that involve it ((ω, γ) = 0) and the level's other integrals
-   ((M, γ) = c) are linear in v at a fixed position; with the fixed velocity components they leave a
-   line ``v₀ + t n``, on which the energy is quadratic (read off the energy kernel at t = 0, ±1): both
-   roots are candidates.
+   are read off the kernels at the cell's position (:mod:`.grid_velocity`). Linear ones ((M, γ) = c)
+   leave a line ``v₀ + t n`` on which the energy is quadratic: two candidates. One quadratic one (the
+   Jacobi problem's K, eq. 2804-4) leaves a plane on which it and the energy are two conics: their
+   common points, up to four candidates.
 3. The crossing. Of the candidates, those crossing the surface in the requested ``direction`` (the
-   sign of the surface's time derivative, from the right-hand side) are the cell's states on the
-   section; the first is taken (the position roots with the free component ≥ 0 first, then the larger
-   t) and ``branches`` says how many there were. A cell with none is ``outside`` the level.
+   sign of the surface's time derivative, from the right-hand side) and, if a ``sheet`` expression is
+   given, where it is > 0, are the cell's states on the section; the first is taken (the position
+   roots with the free component ≥ 0 first) and ``branches`` says how many there were. A cell with
+   none is ``outside`` the level.
 
 Every completed state is checked with the kernels, the constraints and the fixed integrals to 1e-12 of
 their scale (:func:`nonholonomic.analysis.sampling.verified`).
@@ -31,18 +33,16 @@ from itertools import product
 
 import numpy as np
 
-from nonholonomic.analysis.sampling import RECIPES, LevelError, fixable, on_level, verified
-from nonholonomic.definition import MechanicalSystem
 from nonholonomic.analysis.grid_velocity import VelocityError, quadratic_roots, velocities
 from nonholonomic.analysis.poincare_surface import SurfaceError, parse_surface
-from nonholonomic.kernels import NumericSystem, numeric, vectorize
+from nonholonomic.analysis.sampling import RECIPES, LevelError, fixable, on_level, verified
+from nonholonomic.definition import MechanicalSystem
+from nonholonomic.kernels import NumericSystem, VectorKernel, numeric, vectorize
 
 #: States drawn on the level to estimate the region it allows (the default ``ranges``).
 RANGE_SAMPLES = 20000
 #: The estimated region is widened by this fraction of its width on each side.
 RANGE_MARGIN = 0.02
-#: Most cells one map may have.
-MAX_CELLS = 512 * 512
 
 
 class GridError(ValueError):
@@ -77,9 +77,9 @@ class Grid:
 
 @dataclass(frozen=True)
 class Cells:
-    """Cells ``start .. stop − 1`` completed: ``states`` (NaN rows outside the level), ``branches`` (how
-    many states of the level cross the section there in the direction: 0 outside), ``values`` (each
-    cell's two coordinates)."""
+    """Completed cells (``start .. stop − 1``, or the ones asked for): ``states`` (NaN rows outside the
+    level), ``branches`` (how many states of the level cross the section there in the direction: 0
+    outside), ``values`` (each cell's two coordinates)."""
 
     start: int
     states: np.ndarray
@@ -202,7 +202,7 @@ def plan(system: MechanicalSystem, grid: Grid) -> _Plan:
     return _Plan(tuple(idx), tuple(positions), velocity, free_velocity, relations, idx[0])
 
 
-def _sheet(system: MechanicalSystem, text: str | None):  # type: ignore[no-untyped-def]
+def _sheet(system: MechanicalSystem, text: str | None) -> VectorKernel | None:
     """The kernel of the ``sheet`` expression (the cells' states are those where it is > 0), or None.
 
     Raises

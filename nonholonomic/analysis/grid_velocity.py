@@ -16,7 +16,7 @@ points and checked at a seventh), so any kind whose level is linear or quadratic
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 from numpy.polynomial import polynomial as poly
@@ -134,7 +134,7 @@ def _affine(G: np.ndarray, r0: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarr
 _PROBES = np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1]], dtype=float)
 
 
-def _conic_points(at, cells: int) -> list[np.ndarray]:  # type: ignore[no-untyped-def]
+def _conic_points(at: Callable[[np.ndarray], np.ndarray], cells: int) -> list[np.ndarray]:
     """The common points of two conics F_k(s, t) = a s² + b st + c t² + d s + e t + f = 0 (the energy and
     one curved relation), per cell: up to four, NaN-padded, ordered by s then t."""
     values = np.stack([at(np.broadcast_to(q, (cells, 2)).copy()) for q in _PROBES])  # (probe, cell, 2)

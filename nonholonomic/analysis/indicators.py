@@ -44,7 +44,11 @@ INDICATORS = ("megno", "fli", "lyapunov")
 FLI_POINTS = 100
 #: The clock starts at this fraction of T (1/t in z' is singular at t = 0).
 START_FRACTION = 1e-6
-COMPACT = False
+#: Below this much work (orbits × T, in units of time) the integrator is compiled in heyoka's compact
+#: mode: ~0.4 s to compile (the ball) instead of 10 s (20 s the Jacobi problem) on a machine whose heyoka
+#: cache is empty, for an integration about 2× slower. The break-even is near 6e5 for the ball (compact
+#: ~60 cells of t = 500 per second); a whole map's work decides, not a chunk's.
+COMPACT_BELOW = 3e5
 
 
 def default_thresholds(t_final: float) -> dict[str, float]:
@@ -93,23 +97,29 @@ def indicator_equations(system: MechanicalSystem) -> tuple[tuple[hy.expression, 
             + ((ell, g / T), (y, t * g / (T * T)), (z, 2.0 * y * T / t)))
 
 
+def compact_for(work: float) -> bool:
+    """Whether ``work`` (orbits × T) is small enough for the compact mode (:data:`COMPACT_BELOW`)."""
+    return work < COMPACT_BELOW
+
+
 @lru_cache(maxsize=16)
-def batch_template(system: MechanicalSystem, tolerance: float, lanes: int) -> hy.taylor_adaptive_batch:
-    """The compiled batch integrator (once per process)."""
+def batch_template(system: MechanicalSystem, tolerance: float, lanes: int,
+                   compact: bool = False) -> hy.taylor_adaptive_batch:
+    """The compiled batch integrator (once per process and mode)."""
     eqs = list(indicator_equations(system))
     pars = np.zeros((taylor_system(system).n_pars + 1, lanes))
-    return hy.taylor_adaptive_batch(eqs, np.zeros((len(eqs), lanes)), pars=pars, tol=tolerance, compact_mode=COMPACT)
+    return hy.taylor_adaptive_batch(eqs, np.zeros((len(eqs), lanes)), pars=pars, tol=tolerance, compact_mode=compact)
 
 
 _per_thread = threading.local()
 
 
-def _integrator(system: MechanicalSystem, tolerance: float, lanes: int) -> hy.taylor_adaptive_batch:
+def _integrator(system: MechanicalSystem, tolerance: float, lanes: int, compact: bool) -> hy.taylor_adaptive_batch:
     """This thread's copy of the compiled integrator (the last 8 kept)."""
     cache: OrderedDict[tuple[object, ...], object] = _per_thread.__dict__.setdefault("cache", OrderedDict())
-    key = (system, tolerance, lanes)
+    key = (system, tolerance, lanes, compact)
     if key not in cache:
-        cache[key] = copy.deepcopy(batch_template(system, tolerance, lanes))
+        cache[key] = copy.deepcopy(batch_template(system, tolerance, lanes, compact))
         while len(cache) > 8:
             cache.popitem(last=False)
     cache.move_to_end(key)
@@ -118,7 +128,7 @@ def _integrator(system: MechanicalSystem, tolerance: float, lanes: int) -> hy.ta
 
 def run_batch(system: MechanicalSystem, parameters: np.ndarray, initial_states: np.ndarray, t_final: float, *,
               tolerance: float | None = None, progress: ProgressCallback | None = None,
-              lanes: int | None = None) -> list[Indicators | IntegrationError]:
+              lanes: int | None = None, work: float | None = None) -> list[Indicators | IntegrationError]:
     """The indicators of many orbits, ``lanes`` (heyoka's SIMD batch size) at a time.
 
     A lane that fails (a non-finite state) fails alone: its batch is run again without it.
@@ -128,28 +138,31 @@ def run_batch(system: MechanicalSystem, parameters: np.ndarray, initial_states: 
     parameters : shape ``(members, n_parameters)``; initial_states: ``(members, dimension)``.
     progress : ``progress(fraction of members done) -> keep_going``; False raises
         :class:`~nonholonomic.integration.IntegrationCancelled`.
+    work : the whole job's orbits × T (a map's, of which these members are a chunk), which picks the
+        compilation mode (:func:`compact_for`); default these members'.
     """
     P = np.asarray(parameters, dtype=float)
+    compact = compact_for(len(P) * float(t_final) if work is None else work)
     Y0 = np.asarray(initial_states, dtype=float)
     lanes = lanes or hy.recommended_simd_size()
     tol = tolerance or MACHINE_EPSILON
     out: list[Indicators | IntegrationError] = []
     for first in range(0, len(P), lanes):
         stop = min(first + lanes, len(P))
-        out.extend(_batch(system, P[first:stop], Y0[first:stop], float(t_final), tol, lanes))
+        out.extend(_batch(system, P[first:stop], Y0[first:stop], float(t_final), tol, lanes, compact))
         if progress is not None and not progress(stop / len(P)):
             raise IntegrationCancelled(f"cancelled after {stop} of {len(P)} members")
     return out
 
 
 def _batch(system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, T: float, tol: float,
-           lanes: int) -> list[Indicators | IntegrationError]:
+           lanes: int, compact: bool) -> list[Indicators | IntegrationError]:
     failed: dict[int, IntegrationError] = {}
     while True:
         source = lane_sources(len(P), failed, lanes)
         if source is None:
             return [failed[i] for i in range(len(P))]
-        outcome = _run_lanes(system, P[source], Y0[source], T, tol)
+        outcome = _run_lanes(system, P[source], Y0[source], T, tol, compact)
         if isinstance(outcome, list):
             return [failed[i] if i in failed else outcome[i] for i in range(len(P))]
         for lane, reason in outcome.items():
@@ -157,11 +170,11 @@ def _batch(system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, T: float, to
 
 
 def _run_lanes(system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, T: float,
-               tol: float) -> list[Indicators] | dict[int, str]:
+               tol: float, compact: bool) -> list[Indicators] | dict[int, str]:
     """One batch: each lane's indicators, or {lane: why} for the lanes that failed."""
     ts = taylor_system(system)
     n, lanes = system.dimension, len(P)
-    ta = _integrator(system, tol, lanes)
+    ta = _integrator(system, tol, lanes, compact)
     t0 = START_FRACTION * T
     ta.set_time(t0)
     pars = ta.pars
@@ -185,7 +198,7 @@ def _run_lanes(system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, T: float
     ell = out[:, 2 * n, :]
     megno = out[-1, 2 * n + 2, :]
     steps = [int(r[3]) for r in ta.propagate_res]
-    drift = _drifts(system, P, states, tol)
+    drift = _drifts(system, P, states)
     result = []
     for j in range(lanes):
         values = (megno[j], float(np.max(ell[:, j])) * T, ell[-1, j])
@@ -196,7 +209,7 @@ def _run_lanes(system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, T: float
     return result
 
 
-def _drifts(system: MechanicalSystem, P: np.ndarray, states: np.ndarray, tol: float) -> list[dict[str, float]]:
+def _drifts(system: MechanicalSystem, P: np.ndarray, states: np.ndarray) -> list[dict[str, float]]:
     """Each lane's integrals' largest relative drift at the FLI times (``max |I − I(0)| / max(|I(0)|,
     scale)``, as :class:`~nonholonomic.evidence.integrals.IntegralEvidence` has it)."""
     if not system.integrals:
@@ -218,5 +231,6 @@ def _drifts(system: MechanicalSystem, P: np.ndarray, states: np.ndarray, tol: fl
 
 
 def integral_limit(tolerance: float | None) -> float:
-    """The drift an integral may show before the cell's integrals fail (as for a job)."""
+    """The largest relative drift an integral may show on a cell before it counts as a failed check (a
+    job's: :func:`~nonholonomic.evidence.integrals.integral_tolerance`)."""
     return integral_tolerance(tolerance or MACHINE_EPSILON)

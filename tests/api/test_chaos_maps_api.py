@@ -46,6 +46,9 @@ def test_the_integrable_ball_is_regular_in_every_cell(client):
     assert ranges[0][0] < -1.0 < 1.0 < ranges[0][1]
     cell = next(c for c in members if c["status"] == "succeeded")
     assert set(cell["cell"]["indicators"]) == {"megno", "fli", "lyapunov"}
+    # each cell's integrals against a job's tolerance (1e-10 at machine precision): none failed
+    assert view["summary"]["members_with_failed_checks"] == 0
+    assert all(c["cell"]["integrals_failed"] == [] for c in members if c["status"] == "succeeded")
     assert cell["initial_state"]["gamma"][2] == 0.0 and set(cell["label"]) == {"cell", "gamma1", "M3", "branches"}
 
 

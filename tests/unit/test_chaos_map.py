@@ -190,6 +190,14 @@ def test_cells_are_classified_and_a_sample_is_recomputed_independently():
     assert summary["cells"] == 100 and summary["chaotic"] == statuses.count("chaotic")
     assert summary["chaotic_fraction"] == pytest.approx(statuses.count("chaotic") / (100 - statuses.count("outside")))
     assert 0.1 < summary["chaotic_fraction"] < 0.9
+    # a cell whose integral drifted past the job's tolerance counts as a member with a failed check
+    from dataclasses import replace
+
+    from nonholonomic.analysis.ensemble import summarize
+
+    integrated = next(r for r in results if r.values)
+    digests = [cell_digest(integrated), cell_digest(replace(integrated, drift_failed=("energy",)))]
+    assert summarize(digests)["members_with_failed_checks"] == 1 and digests[1]["checks_failed"] == ["energy"]
     checked = [r for r in results if r.check is not None]
     assert len(checked) == len([k for k in checked_cells(100) if cells.inside[k]])
 
