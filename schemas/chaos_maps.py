@@ -70,11 +70,11 @@ def map_arrays(request: Mapping[str, Any], members: Iterable[Mapping[str, Any]],
     branches = np.zeros(shape, dtype=np.int8)
     values = {name: np.full(shape, np.nan) for name in request["indicators"]}
     drift: dict[str, np.ndarray] = {}
-    for m in members:
-        i, j = m["label"]["cell"]
+    for m in members:  # a chunk that failed whole stores its cells with index, status and error only
+        i, j = divmod(int(m["index"]), shape[1])
         block = m.get("cell", {})
         status[i, j] = STATUS_CODES[block.get("status", "failed")]
-        branches[i, j] = m["label"].get("branches", 0)
+        branches[i, j] = (m.get("label") or {}).get("branches", 0)
         for name, v in block.get("indicators", {}).items():
             if name in values:
                 values[name][i, j] = v

@@ -157,8 +157,8 @@ def map_summary(digests: Sequence[Mapping[str, Any]], indicators_asked: Sequence
     """Counts per status, ``chaotic_fraction`` (chaotic / integrated cells), the thresholds, the
     indicators' ranges and the independent recomputation's agreement."""
     counts = {s: 0 for s in ("regular", "chaotic", "outside", "failed")}
-    for d in digests:
-        counts[d["cell_status"]] += 1
+    for d in digests:  # a chunk that failed whole stores its cells as failed members without a cell status
+        counts[d.get("cell_status", "failed")] += 1
     integrated = counts["regular"] + counts["chaotic"]
     out: dict[str, Any] = {
         "cells": len(digests), **counts,

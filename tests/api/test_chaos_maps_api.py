@@ -141,3 +141,26 @@ def test_an_ensemble_that_is_not_a_map_has_no_map(client):
     view = poll_job(client, r.headers["location"], timeout=60)
     r = client.get(f"/v1/ensembles/{view['id']}/map")
     assert r.status_code == 409 and "not a chaos map" in r.json()["detail"]
+
+
+def test_a_chunk_that_fails_whole_leaves_a_map_with_its_cells_failed(client, monkeypatch):
+    """The cells of a chunk that raised are stored as failed members (index, status, error): the summary,
+    the exports, the image and the page still answer, with those cells `failed`."""
+    import workers.ensembles as chunks
+
+    real = chunks.run_cells
+
+    def broken(system, members, *args, **kwargs):
+        if members[0].index == 0:
+            raise RuntimeError("a bug in the first chunk")
+        return real(system, members, *args, **kwargs)
+
+    monkeypatch.setattr(chunks, "run_cells", broken)
+    view, members = run(client, chaos_map(LINEAR, t_final=50.0, chunk_size=30))
+    m = view["summary"]["map"]
+    assert m["failed"] == 30 and m["regular"] + m["chaotic"] + m["outside"] == 90
+    assert view["summary"]["failed"] == 30 and "a bug in the first chunk" in view["summary"]["failures"][0]["error"]
+    js = client.get(f"/v1/ensembles/{view['id']}/map", params={"format": "json"}).json()
+    assert [row[:10] for row in js["status"][:3]] == [["failed"] * 10] * 3
+    for path in ("map?format=csv", "map?format=netcdf", "plots/map.png", "page"):
+        assert client.get(f"/v1/ensembles/{view['id']}/{path}").status_code == 200, path
