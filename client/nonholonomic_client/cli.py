@@ -74,7 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("ensemble", help="submit an ensemble (SPEC: a JSON request; - reads stdin)")
     p.add_argument("spec", metavar="SPEC")
     p.add_argument("--wait", action="store_true", help="wait with a progress bar, then print a summary")
-    p.add_argument("--out", metavar="FILE", help="write the Poincare section (.csv or .npz; implies --wait)")
+    p.add_argument("--out", metavar="FILE", help="write the Poincare section (.csv or .npz), or a chaos map's cells "
+                                                 "(.csv or .nc); implies --wait")
     p.set_defaults(func=commands.ensemble)
 
     p = sub.add_parser("report", help="run the paper report and save its HTML page")

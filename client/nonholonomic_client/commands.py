@@ -128,13 +128,15 @@ def run(args: argparse.Namespace) -> int:
 
 
 def ensemble(args: argparse.Namespace) -> int:
-    """``nonholonomic ensemble SPEC [--wait] [--out section.csv|.npz]``: submit an ensemble, maybe wait.
+    """``nonholonomic ensemble SPEC [--wait] [--out section.csv|.npz]``: submit an ensemble, maybe wait; a
+    chaos map's ``--out`` writes the map (``map.csv`` or ``map.nc``).
 
     Exit code 1 when every member failed (an ensemble whose members fail alone still succeeds).
     """
-    fmt = out_format(args.out, ("csv", "npz"))
     spec = read_spec(args.spec)
-    if fmt and isinstance(spec, dict) and not spec.get("poincare"):
+    chaos_map = isinstance(spec, dict) and bool(spec.get("indicators"))
+    fmt = out_format(args.out, ("csv", "nc") if chaos_map else ("csv", "npz"))
+    if fmt and not chaos_map and isinstance(spec, dict) and not spec.get("poincare"):
         raise UsageError("--out writes the Poincare section: the spec asks for none (add \"poincare\")")
     with _client(args) as api:
         ensemble_id = api.submit_ensemble(spec)
@@ -143,7 +145,10 @@ def ensemble(args: argparse.Namespace) -> int:
             return 0
         view = _wait(api.wait_ensemble, ensemble_id, f"ensemble {ensemble_id}")
         print(ensemble_summary(view))
-        if args.out:
+        if args.out and chaos_map:
+            path = api.chaos_map(ensemble_id, "netcdf" if fmt == "nc" else "csv", out=args.out)
+            print(f"map written to {path}")
+        elif args.out:
             path = api.section(ensemble_id, fmt, out=args.out)  # type: ignore[arg-type]
             print(f"section written to {path}")
     summary = view.get("summary") or {}

@@ -117,6 +117,12 @@ def ensemble_summary(view: Mapping[str, Any]) -> str:
         lines.append(f"  largest exponent over {exponent.get('count')} members [1/s]: min {_num(exponent.get('min'))},"
                      f" median {_num(exponent.get('median'))}, mean {_num(exponent.get('mean'))},"
                      f" max {_num(exponent.get('max'))}")
+    chaos = summary.get("map")
+    if chaos:
+        fraction = chaos.get("chaotic_fraction")
+        lines.append(f"  map {chaos.get('cells')} cells: {chaos.get('regular')} regular, {chaos.get('chaotic')} chaotic, "
+                     f"{chaos.get('outside')} outside, {chaos.get('failed')} failed; chaotic fraction "
+                     f"{_num(fraction)} (by {chaos.get('status_by')} > {_num((chaos.get('thresholds') or {}).get(chaos.get('status_by')))})")
     points = summary.get("section_points")
     if points:
         lines.append(f"  section points {points.get('total')} ({points.get('min_per_member')} .. "

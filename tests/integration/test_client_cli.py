@@ -178,6 +178,20 @@ def test_cli_systems_lists_the_kinds(base):
     assert raw.returncode == 0 and "chaplygin_ball" in [s["kind"] for s in json.loads(raw.stdout)["systems"]]
 
 
+def test_cli_ensemble_writes_a_chaos_maps_cells(base, tmp_path):
+    spec = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7}, "t_final": 50.0,
+            "indicators": ["megno"], "members": {"grid": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
+                                                          "level": {"energy": 2.0, "area": 0.0}, "shape": [6, 5]}}}
+    (tmp_path / "map.json").write_text(json.dumps(spec))
+    done = _cli(base, "ensemble", "map.json", "--out", "map.csv", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "map 30 cells:" in done.stdout and "chaotic fraction" in done.stdout and "map written to" in done.stdout
+    rows = list(csv.reader(io.StringIO((tmp_path / "map.csv").read_text())))
+    assert rows[0][:5] == ["i", "j", "gamma1 [1]", "M3 [kg m^2/s]", "status"] and len(rows) == 31
+    wrong = _cli(base, "ensemble", "map.json", "--out", "map.npz", cwd=tmp_path)
+    assert wrong.returncode == 2 and ".csv, .nc" in wrong.stderr
+
+
 def test_cli_run_writes_the_trajectory(base, tmp_path):
     (tmp_path / "spec.json").write_text(json.dumps(BALL))
     done = _cli(base, "run", "spec.json", "--out", "traj.csv", "--result", "result.json", cwd=tmp_path)
