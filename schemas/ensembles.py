@@ -18,7 +18,7 @@ from nonholonomic.analysis.chaos_map import MapOptions
 from nonholonomic.analysis.ensemble import Member, default_chunk_size, plan
 from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges
 from nonholonomic.analysis.grid import plan as plan_grid
-from nonholonomic.analysis.indicators import default_thresholds
+from nonholonomic.analysis.indicators import thresholds_for
 from nonholonomic.definition import MechanicalSystem, Parameter
 from nonholonomic.initial_state import FieldProblem, initial_state_problems, project_initial_state
 from nonholonomic.kernels import parameter_vector, state_vector
@@ -174,7 +174,7 @@ class EnsembleRequest(BaseModel):
 
     def map_thresholds(self) -> dict[str, float]:
         """Every indicator's threshold: the request's, else the default for ``t_final``."""
-        return {**default_thresholds(self.t_final), **(self.thresholds or {})}
+        return thresholds_for(self.t_final, self.thresholds)
 
     def map_options(self) -> MapOptions:
         return MapOptions(tuple(self.indicators or ()), self.map_thresholds(), self.members.count,

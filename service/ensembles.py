@@ -14,7 +14,7 @@ import numpy as np
 
 from nonholonomic.analysis.chaos_map import map_summary
 from nonholonomic.analysis.ensemble import summarize
-from nonholonomic.analysis.indicators import default_thresholds
+from nonholonomic.analysis.indicators import thresholds_for
 from schemas.results import system_units
 from schemas.systems import definition_of
 from service.exports import point_array, section_columns, vector_widths
@@ -53,8 +53,8 @@ def _summary(request: dict[str, Any], digests: list[dict[str, Any]]) -> dict[str
     """The members' summary, with the map's (counts per status, chaotic fraction, thresholds) for a map."""
     summary = summarize(digests)
     if request.get("indicators"):
-        thresholds = {**default_thresholds(request["t_final"]), **(request.get("thresholds") or {})}
-        summary["map"] = map_summary(digests, request["indicators"], thresholds)
+        summary["map"] = map_summary(digests, request["indicators"],
+                                     thresholds_for(request["t_final"], request.get("thresholds")))
     return summary
 
 

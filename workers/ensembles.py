@@ -81,8 +81,9 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
     try:
         members = request.members_list(start, stop)
         if request.indicators:
-            cells = run_cells(request.definition(), members, request.t_final, request.map_options(), progress)
-            members_json, digests = [cell_to_json(request.definition(), c) for c in cells], [cell_digest(c) for c in cells]
+            system = request.definition()
+            cells = run_cells(system, members, request.t_final, request.map_options(), progress)
+            members_json, digests = [cell_to_json(system, c) for c in cells], [cell_digest(c) for c in cells]
             write_until_stored(lambda: store.store_chunk(ensemble_id, chunk, members_json, digests, worker))
             return "done"
         results = run_chunk(

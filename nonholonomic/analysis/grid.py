@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import product
 
 import numpy as np
@@ -37,6 +38,7 @@ from nonholonomic.analysis.grid_velocity import VelocityError, quadratic_roots, 
 from nonholonomic.analysis.poincare_surface import SurfaceError, parse_surface
 from nonholonomic.analysis.sampling import RECIPES, LevelError, fixable, on_level, verified
 from nonholonomic.definition import MechanicalSystem
+from nonholonomic.initial_state import vector_slice
 from nonholonomic.kernels import NumericSystem, VectorKernel, numeric, vectorize
 
 #: States drawn on the level to estimate the region it allows (the default ``ranges``).
@@ -113,14 +115,6 @@ def component_index(system: MechanicalSystem, name: str) -> int:
     return names.index(name)
 
 
-def _vectors(system: MechanicalSystem) -> list[tuple[str, range]]:
-    out, offset = [], 0
-    for vec in system.state:
-        out.append((vec.name, range(offset, offset + len(vec.symbols))))
-        offset += len(vec.symbols)
-    return out
-
-
 @dataclass(frozen=True)
 class _Plan:
     """Which components each stage solves for."""
@@ -165,7 +159,7 @@ def plan(system: MechanicalSystem, grid: Grid) -> _Plan:
     if "energy" not in grid.level:
         raise GridError("level.energy", "required: the energy sets the size of the velocities")
     velocity_name = RECIPES[system.kind].velocity
-    vectors = dict(_vectors(system))
+    vectors = {vec.name: range(*vector_slice(system, vec.name).indices(system.dimension)) for vec in system.state}
     velocity = tuple(vectors[velocity_name])
     positions = []
     for c, constraint in enumerate(system.constraints):
@@ -222,19 +216,27 @@ def _sheet(system: MechanicalSystem, text: str | None) -> VectorKernel | None:
 
 def default_ranges(system: MechanicalSystem, p: np.ndarray, grid: Grid) -> tuple[tuple[float, float], ...]:
     """The region the level allows in each coordinate, estimated from :data:`RANGE_SAMPLES` states drawn
-    on the level (seed 0) and widened by :data:`RANGE_MARGIN` of its width on each side.
+    on the level (seed 0) and widened by :data:`RANGE_MARGIN` of its width on each side (remembered per
+    process: a POST validates the grid, then stores its ranges).
 
     Raises
     ------
     GridError
         If the level cannot be sampled.
     """
+    return _ranges(system, tuple(np.asarray(p, dtype=float).tolist()), tuple(sorted(grid.level.items())),
+                   grid.coordinates)
+
+
+@lru_cache(maxsize=32)
+def _ranges(system: MechanicalSystem, p: tuple[float, ...], level: tuple[tuple[str, float], ...],
+            coordinates: tuple[str, str]) -> tuple[tuple[float, float], ...]:
     try:
-        states = on_level(system, p, dict(grid.level), RANGE_SAMPLES, 0)
+        states = on_level(system, np.array(p), dict(level), RANGE_SAMPLES, 0)
     except LevelError as exc:
         raise GridError(exc.field, exc.reason) from None
     out = []
-    for name in grid.coordinates:
+    for name in coordinates:
         column = states[:, component_index(system, name)]
         lo, hi = float(column.min()), float(column.max())
         pad = RANGE_MARGIN * max(hi - lo, 1e-12)

@@ -21,16 +21,14 @@ system is autonomous: only the weights t and 1/t of y and z see the shift; âŸ¨Yâ
 
 from __future__ import annotations
 
-import copy
-import threading
-from collections import OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
 
 import heyoka as hy
 import numpy as np
 
-from nonholonomic.analysis.lyapunov_variational import initial_frame
+from nonholonomic.analysis.lyapunov_variational import initial_frame, thread_copy
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import integral_tolerance
 from nonholonomic.integration import MACHINE_EPSILON, IntegrationCancelled, IntegrationError, ProgressCallback
@@ -62,6 +60,11 @@ def default_thresholds(t_final: float) -> dict[str, float]:
     """
     fli = float(np.log(max(t_final, 1.0))) + 3.0
     return {"megno": 3.0, "fli": fli, "lyapunov": fli / t_final}
+
+
+def thresholds_for(t_final: float, given: Mapping[str, float] | None = None) -> dict[str, float]:
+    """Every indicator's threshold: those ``given``, else :func:`default_thresholds` for ``t_final``."""
+    return {**default_thresholds(t_final), **(given or {})}
 
 
 @dataclass(frozen=True)
@@ -111,19 +114,10 @@ def batch_template(system: MechanicalSystem, tolerance: float, lanes: int,
     return hy.taylor_adaptive_batch(eqs, np.zeros((len(eqs), lanes)), pars=pars, tol=tolerance, compact_mode=compact)
 
 
-_per_thread = threading.local()
-
-
 def _integrator(system: MechanicalSystem, tolerance: float, lanes: int, compact: bool) -> hy.taylor_adaptive_batch:
-    """This thread's copy of the compiled integrator (the last 8 kept)."""
-    cache: OrderedDict[tuple[object, ...], object] = _per_thread.__dict__.setdefault("cache", OrderedDict())
-    key = (system, tolerance, lanes, compact)
-    if key not in cache:
-        cache[key] = copy.deepcopy(batch_template(system, tolerance, lanes, compact))
-        while len(cache) > 8:
-            cache.popitem(last=False)
-    cache.move_to_end(key)
-    return cache[key]  # type: ignore[return-value]
+    """This thread's copy of the compiled integrator."""
+    return thread_copy(("indicators", system, tolerance, lanes, compact),
+                       lambda: batch_template(system, tolerance, lanes, compact))
 
 
 def run_batch(system: MechanicalSystem, parameters: np.ndarray, initial_states: np.ndarray, t_final: float, *,

@@ -15,7 +15,9 @@ import copy
 import math
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from functools import lru_cache
+from typing import TypeVar
 
 import heyoka as hy
 import numpy as np
@@ -78,21 +80,27 @@ def variational_batch_template(system: MechanicalSystem, tolerance: float, lanes
 _per_thread = threading.local()
 #: Copies one thread keeps, least recently used dropped first (as many as the templates' caches).
 THREAD_COPIES = 16
+T = TypeVar("T")
 
 
-def _integrator(system: MechanicalSystem, tolerance: float, lanes: int = 0) -> hy.taylor_adaptive:
-    """This thread's own copy of the compiled integrator (``lanes`` 0: scalar; the last
-    :data:`THREAD_COPIES` kept)."""
+def thread_copy(key: tuple[object, ...], template: Callable[[], T]) -> T:
+    """This thread's own copy of a compiled integrator (``template()`` deep-copied on first use; the last
+    :data:`THREAD_COPIES` kept, least recently used dropped first). Shared by the tangent flows here and
+    the chaos indicators' (:mod:`nonholonomic.analysis.indicators`)."""
     cache: OrderedDict[tuple[object, ...], object] = _per_thread.__dict__.setdefault("cache", OrderedDict())
-    key = (system, tolerance, lanes)
     if key not in cache:
-        template = (variational_template(system, tolerance) if lanes == 0
-                    else variational_batch_template(system, tolerance, lanes))
-        cache[key] = copy.deepcopy(template)
+        cache[key] = copy.deepcopy(template())
         while len(cache) > THREAD_COPIES:
             cache.popitem(last=False)
     cache.move_to_end(key)
     return cache[key]  # type: ignore[return-value]
+
+
+def _integrator(system: MechanicalSystem, tolerance: float, lanes: int = 0) -> hy.taylor_adaptive:
+    """This thread's own copy of the compiled integrator (``lanes`` 0: scalar)."""
+    return thread_copy(("tangent", system, tolerance, lanes),
+                       lambda: variational_template(system, tolerance) if lanes == 0
+                       else variational_batch_template(system, tolerance, lanes))
 
 
 def initial_frame(n: int) -> np.ndarray:
