@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from nonholonomic.analysis.options import SectionOptions, SpectrumOptions
+from nonholonomic.analysis.options import PeriodicOrbitOptions, SectionOptions, SpectrumOptions
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import IntegralEvidence, integral_evidence
 from nonholonomic.evidence.measure import CheckEvidence, measure_evidence
@@ -26,6 +26,8 @@ from nonholonomic.structure import bracket_evidence, euler_angle_evidence, struc
 
 if TYPE_CHECKING:
     from nonholonomic.analysis.lyapunov import Spectrum
+    from nonholonomic.analysis.periodic_continuation import Branch
+    from nonholonomic.analysis.periodic_orbit import PeriodicOrbit
     from nonholonomic.analysis.poincare import Section
 
 #: Evidence a simulation can compute (``bracket``, ``euler_angles`` and ``isomorphisms`` only for some kinds, see
@@ -55,6 +57,8 @@ class SimulationResult:
     projections: list[ProjectionReport] = field(default_factory=list)
     poincare: Section | None = None
     lyapunov: Spectrum | None = None
+    periodic_orbit: PeriodicOrbit | None = None
+    continuation: Branch | None = None
 
     def state(self, name: str) -> np.ndarray:
         """Samples of the state vector ``name`` (shape ``(n, 3)``), or of a derived vector."""
@@ -103,6 +107,7 @@ def simulate(
     progress: ProgressCallback | None = None,
     poincare: SectionOptions | None = None,
     lyapunov: SpectrumOptions | None = None,
+    periodic_orbit: PeriodicOrbitOptions | None = None,
 ) -> SimulationResult:
     """Integrate ``system`` and compute the requested evidence, section and spectrum.
 
@@ -115,6 +120,7 @@ def simulate(
         instead of refusing a state off them.
     poincare : a Poincaré section of the same orbit over [0, t_final] (heyoka events).
     lyapunov : the Lyapunov spectrum of the orbit (heyoka variational equations, QR).
+    periodic_orbit : a periodic orbit of a section map seeded by the initial state, and its continuation.
 
     Raises
     ------
@@ -132,10 +138,10 @@ def simulate(
     projections: list[ProjectionReport] = []
     if project:
         y0, projections = project_initial_state(system, p, y0)
-    parts = 1 + (poincare is not None) + (lyapunov is not None)
+    parts = 1 + (poincare is not None) + (lyapunov is not None) + (periodic_orbit is not None)
     trajectory = integrate(system, p, y0, t_final, samples, engine=engine, tolerance=tolerance,
                            progress=phase(progress, 0.0, 1.0 / parts))
-    section = spectrum = None
+    section = spectrum = orbit = branch = None
     done = 1
     if poincare is not None:
         section = poincare.run(system, p, y0, t_final, tolerance=tolerance,
@@ -143,7 +149,11 @@ def simulate(
         done += 1
     if lyapunov is not None:
         spectrum = lyapunov.run(system, p, y0, t_final, tolerance=tolerance,
-                                progress=phase(progress, done / parts, 1.0))
+                                progress=phase(progress, done / parts, (done + 1) / parts))
+        done += 1
+    if periodic_orbit is not None:
+        orbit, branch = periodic_orbit.run(system, p, y0, t_final, tolerance=tolerance,
+                                           progress=phase(progress, done / parts, 1.0))
     derived, integrals, found = evidence(system, p, trajectory, checks)
     return SimulationResult(system, p, trajectory, derived, integrals, found,
-                            parameter_warnings(system, parameters), projections, section, spectrum)
+                            parameter_warnings(system, parameters), projections, section, spectrum, orbit, branch)

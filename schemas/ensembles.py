@@ -8,7 +8,6 @@ API (validation) and in every worker (each chunk rebuilds it), so a chunk needs 
 
 from __future__ import annotations
 
-import re
 from typing import Any, Literal
 
 import numpy as np
@@ -19,19 +18,19 @@ from nonholonomic.analysis.ensemble import Member, default_chunk_size, plan
 from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges
 from nonholonomic.analysis.grid import plan as plan_grid
 from nonholonomic.analysis.indicators import thresholds_for
-from nonholonomic.definition import MechanicalSystem, Parameter
+from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem, initial_state_problems, project_initial_state
 from nonholonomic.kernels import parameter_vector, state_vector
 from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems, t_final_within_limit
 from schemas.results import MemberResultModel
 from schemas.settings import get_settings
+from schemas.sweeps import sweep_target, swept
 from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step
 
 ENSEMBLE_JOB = "ensemble"
 #: Cells of a map completed at validation (evenly spread; the chunks complete every one).
 VALIDATED_CELLS = 256
-_PATH = re.compile(r"^(?:potential\.)?([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
 
 
 class SampleMembers(BaseModel):
@@ -271,11 +270,11 @@ class EnsembleRequest(BaseModel):
                     break
         elif spec.sweep is not None:
             try:
-                group, index = _sweep_target(system, spec.sweep.parameter)
+                group, index = sweep_target(system, spec.sweep.parameter)
             except ValueError as exc:
                 return [FieldProblem("members.sweep.parameter", str(exc))]
             for i, value in enumerate(spec.sweep.values):
-                values = _swept(parameters, group, index, value)
+                values = swept(parameters, group, index, value)
                 try:
                     parameter_vector(system, values)
                 except ValueError as exc:
@@ -340,11 +339,11 @@ class EnsembleRequest(BaseModel):
         if spec.initial_states is not None:
             return [Member(i, p, self._state(system, p, spec.initial_states[i])) for i in range(start, stop)]
         if spec.sweep is not None:
-            group, index = _sweep_target(system, spec.sweep.parameter)
+            group, index = sweep_target(system, spec.sweep.parameter)
             out = []
             for i in range(start, stop):
                 value = spec.sweep.values[i]
-                pi = parameter_vector(system, _swept(parameters, group, index, value))
+                pi = parameter_vector(system, swept(parameters, group, index, value))
                 out.append(Member(i, pi, self._state(system, pi, spec.sweep.initial_state),
                                   {"parameter": spec.sweep.parameter, "value": value}))
             return out
@@ -381,35 +380,6 @@ class LevelProblem(ValueError):
     def __init__(self, field: str, reason: str) -> None:
         super().__init__(f"{field}: {reason}")
         self.field, self.reason = field, reason
-
-
-def _sweep_target(system: MechanicalSystem, path: str) -> tuple[Parameter, int | None]:
-    """The parameter group and component a sweep path names (``inertia[1]`` → inertia, 1)."""
-    match = _PATH.match(path.strip())
-    groups = {p.name: p for p in system.parameters}
-    if not match or match.group(1) not in groups:
-        raise ValueError(f"{path!r} names no parameter of {system.kind}; known: "
-                         + ", ".join(p.name + ("[i]" if p.is_vector else "") for p in system.parameters))
-    par = groups[match.group(1)]
-    index = None if match.group(2) is None else int(match.group(2))
-    if par.shape == "symmetric_matrix":
-        raise ValueError(f"{par.name} is a matrix; sweeps take a scalar or a vector component")
-    if par.is_vector and (index is None or index >= len(par.symbols)):
-        raise ValueError(f"{par.name} is a vector: name a component {par.name}[0] .. {par.name}[{len(par.symbols) - 1}]")
-    if not par.is_vector and index is not None:
-        raise ValueError(f"{par.name} is a scalar: no index")
-    return par, index
-
-
-def _swept(parameters: dict[str, Any], par: Parameter, index: int | None, value: float) -> dict[str, Any]:
-    values = dict(parameters)
-    if index is None:
-        values[par.name] = value
-    else:
-        vector = list(values[par.name])
-        vector[index] = value
-        values[par.name] = vector
-    return values
 
 
 class EnsembleAccepted(BaseModel):

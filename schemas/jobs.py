@@ -14,6 +14,7 @@ from nonholonomic.initial_state import FieldProblem, initial_state_problems
 from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
 from nonholonomic.definition import MechanicalSystem
 from schemas.analysis import LyapunovRequest, PoincareRequest
+from schemas.periodic_orbits import PeriodicOrbitRequest
 from schemas.report import PaperReport
 from schemas.settings import get_settings
 from schemas.results import SimulationResultModel
@@ -91,6 +92,9 @@ class JobRequest(BaseModel):
     poincare: PoincareRequest | None = Field(None, description="a Poincare section of the orbit (heyoka events)")
     lyapunov: LyapunovRequest | None = Field(None, description="the Lyapunov spectrum of the orbit (heyoka "
                                                                "variational equations, QR)")
+    periodic_orbit: PeriodicOrbitRequest | None = Field(
+        None, description="a periodic orbit of a Poincare section map, seeded by the initial state (Newton with the "
+                          "monodromy), its multipliers and checks; with 'sweep', its continuation in a parameter")
     claims: list[ClaimRequest] = Field(
         default_factory=list, max_length=MAX_CLAIMS,
         description="candidate integrals or Casimirs of one's own, each checked along the trajectory (drift) and "
@@ -111,6 +115,8 @@ class JobRequest(BaseModel):
         found = self.system.expressions()  # type: ignore[attr-defined]
         if self.poincare is not None:
             found.append(("poincare.surface", self.poincare.surface))
+        if self.periodic_orbit is not None:
+            found.append(("periodic_orbit.surface", self.periodic_orbit.surface))
         return found + [(f"claims[{i}].expression", claim.expression) for i, claim in enumerate(self.claims)]
 
     def problems(self, step: Step = no_step) -> list[FieldProblem]:
@@ -126,6 +132,13 @@ class JobRequest(BaseModel):
         found += initial_state_problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
                                         self.initial_state, self.project_initial_state)
         found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov, step)
+        if self.periodic_orbit is not None:
+            step(["periodic_orbit.surface"])
+            if self.integrator.engine != "heyoka":
+                found.append(FieldProblem("integrator.engine", "periodic_orbit needs heyoka (events and the "
+                                                               "variational equations)"))
+            found += self.periodic_orbit.problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
+                                                  self.t_final, self.integrator.tolerance)
         for i, claim in enumerate(self.claims):
             step([f"claims[{i}].expression"])
             try:

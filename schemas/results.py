@@ -14,6 +14,7 @@ from nonholonomic.analysis.ensemble import MemberResult
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.simulation import SimulationResult
 from schemas.analysis import SectionResult, SpectrumResult, section_to_json, spectrum_to_json
+from schemas.periodic_orbits import PeriodicOrbitResult, branch_to_json, orbit_to_json
 
 
 class IntegralItem(BaseModel):
@@ -133,6 +134,7 @@ class SimulationResultModel(BaseModel):
     poincare: SectionResult | None = Field(None, description="the Poincare section, when asked for "
                                                              "(GET /v1/jobs/{id}/section exports it)")
     lyapunov: SpectrumResult | None = Field(None, description="the Lyapunov spectrum, when asked for")
+    periodic_orbit: PeriodicOrbitResult | None = Field(None, description="the periodic orbit, when asked for")
     claims: list[ClaimItem] = Field(default_factory=list, description="the request's claims, each with its evidence")
 
 
@@ -182,7 +184,17 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
         "warnings": list(result.warnings),
         "poincare": None if result.poincare is None else section_to_json(result.poincare),
         "lyapunov": None if result.lyapunov is None else spectrum_to_json(result.lyapunov),
+        "periodic_orbit": _periodic_orbit(result),
     }
+
+
+def _periodic_orbit(result: SimulationResult) -> dict[str, Any] | None:
+    if result.periodic_orbit is None:
+        return None
+    out = orbit_to_json(result.system, result.periodic_orbit)
+    if result.continuation is not None:
+        out["continuation"] = branch_to_json(result.system, result.continuation)
+    return out
 
 
 #: An ensemble member's convergence series is thinned to this many rows (a job keeps ~1000).

@@ -23,6 +23,8 @@ JOB_PLOT_CAPTIONS = {
     "poincare": "the Poincaré section: the two coordinates asked for at each crossing",
     "lyapunov": "running finite-time estimates of the Lyapunov exponents (QR every interval); the title says "
                 "whether they have converged",
+    "periodic_orbit": "the periodic orbit's multipliers on the complex plane (on the unit circle: elliptic); the "
+                      "continuation's trace against the swept parameter, or Newton's closing residual per step",
 }
 ENSEMBLE_PLOT_CAPTIONS = {
     "poincare": "every member's section points, one colour per member",

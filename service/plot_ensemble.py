@@ -12,8 +12,8 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from schemas.sweeps import PATH as SWEEP_PATH
 from service.plots import (
-    _SWEEP_PATH,
     MAX_SECTION_POINTS,
     PlotUnavailable,
     _axis_label,
@@ -114,7 +114,7 @@ def _ensemble_exponents_figure(view: Mapping[str, Any], members: Iterable[Mappin
             ax.plot(x[bad], y[bad], "o", markerfacecolor="white", color="C3", markersize=5, label="not converged")
         ax.axhline(0.0, color="0.5", linewidth=0.6)
         path = sweep["parameter"]
-        match = _SWEEP_PATH.match(path.strip())
+        match = SWEEP_PATH.match(path.strip())
         unit = units.get(match.group(1)) if match else None
         ax.set_xlabel(f"{path} [{unit}]" if unit is not None else path)
         ax.set_ylabel(ylabel)

@@ -47,7 +47,7 @@ from nonholonomic.definition import MechanicalSystem, StateConstraint, StateVect
 from nonholonomic.potentials import EXPRESSION
 from nonholonomic.systems import SURFACE_KINDS, get_system
 
-JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov")
+JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit")
 ENSEMBLE_PLOTS: tuple[str, ...] = ("poincare", "exponents", "map")
 FORMATS = {"png": "image/png", "svg": "image/svg+xml"}
 
@@ -77,7 +77,6 @@ _LOCK = threading.Lock()
 _GREEK = {"gamma": "γ", "Gamma": "Γ", "omega": "ω", "tau": "τ", "alpha": "α", "beta": "β", "lambda": "λ"}
 _SUBSCRIPT = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
 _COMPONENT = re.compile(r"^([A-Za-z_]+?)(\d*)$")
-_SWEEP_PATH = re.compile(r"^(?:potential\.)?([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
 
 
 class PlotUnavailable(ValueError):
@@ -95,7 +94,8 @@ def job_plot(name: str, result: dict, request: dict, fmt: str) -> bytes:
     name : one of :data:`JOB_PLOTS`: ``trajectory`` (the geometric vector on its sphere or
         ellipsoid, the momentum-like vector against t), ``integrals`` (relative drift of every first
         integral, log scale, the verdict's tolerance), ``poincare`` (the section's two coordinates),
-        ``lyapunov`` (running estimates of the exponents).
+        ``lyapunov`` (running estimates of the exponents), ``periodic_orbit`` (the multipliers on the complex
+        plane; the continuation's trace, or Newton's residuals).
     result : the job's ``result`` (``GET /v1/jobs/{id}``).
     request : the job's ``request`` (the integrals plot rebuilds the system and its parameters from it).
     fmt : ``png`` or ``svg`` (:data:`FORMATS`).
@@ -115,8 +115,10 @@ def job_plot(name: str, result: dict, request: dict, fmt: str) -> bytes:
     _check(name, JOB_PLOTS, fmt)
     if not isinstance(result, Mapping) or "trajectory" not in result:
         raise PlotUnavailable("this job has no simulation result to plot (a paper report, or no result yet)")
+    from service.plot_periodic import periodic_orbit_figure  # its own module, which imports this one
+
     with _LOCK, matplotlib.rc_context(_STYLE):
-        fig = _JOB_FIGURES[name](result, request)
+        fig = {**_JOB_FIGURES, "periodic_orbit": periodic_orbit_figure}[name](result, request)
         transient = getattr(fig, "nonholonomic_transient", False)
         data = _render(fig, fmt)
     if transient:
@@ -459,6 +461,12 @@ def _poincare_figure(result: Mapping[str, Any], request: Mapping[str, Any] | Non
                rasterized=len(points) > 2000, in_layout=False)
     if not len(points):
         ax.text(0.5, 0.5, "no crossing of the surface", transform=ax.transAxes, ha="center", va="center")
+    orbit = result.get("periodic_orbit") or {}
+    if (orbit.get("status") in ("found", "degenerate") and orbit.get("coordinate_names") == list(names)
+            and orbit.get("surface") == section["surface"] and orbit.get("value") == section["value"]):
+        ax.scatter(*orbit["coordinates"], marker="*", s=160, color="C3", edgecolors="k", linewidths=0.5, zorder=3,
+                   label=f"the periodic orbit (period {orbit['period']}, {orbit.get('stability')})")
+        ax.legend(loc="best", fontsize=8)
     ax.set_xlabel(_axis_label(names[0], units))
     ax.set_ylabel(_axis_label(names[1], units))
     ax.grid(alpha=0.3)

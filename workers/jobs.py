@@ -56,6 +56,7 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
         tolerance=job.integrator.tolerance, progress=progress,
         poincare=job.poincare.options() if job.poincare else None,
         lyapunov=job.lyapunov.options() if job.lyapunov else None,
+        periodic_orbit=job.periodic_orbit.options(system, parameters) if job.periodic_orbit else None,
     )
     out = result_to_json(result, parameters)
     if job.claims:

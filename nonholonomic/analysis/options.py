@@ -7,7 +7,7 @@ orbit, ``run_batch`` on the members of an ensemble chunk.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -86,3 +86,40 @@ class SpectrumOptions:
             except IntegrationError as exc:
                 out.append(exc)
         return out
+
+
+@dataclass(frozen=True)
+class PeriodicOrbitOptions:
+    """A periodic orbit of the ``period``-th return map to ``surface = value``, seeded by the job's initial state
+    (:mod:`.periodic_orbit`), and its continuation through ``sweep_vectors`` (one parameter vector per value of
+    ``sweep_parameter``, :mod:`.periodic_continuation`)."""
+
+    surface: str
+    value: float = 0.0
+    direction: str = "increasing"
+    period: int = 1
+    coordinates: tuple[str, str] | None = None
+    level: tuple[str, ...] | None = None
+    sweep_parameter: str | None = None
+    sweep_values: tuple[float, ...] = ()
+    sweep_vectors: tuple[np.ndarray, ...] = ()
+
+    def run(self, system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, t_final: float, *,
+            tolerance: float | None = None, progress: ProgressCallback | None = None) -> tuple[Any, Any]:
+        """The orbit and, with a sweep, its :class:`~.periodic_continuation.Branch` (None without one, or when
+        the orbit was not closed: there is nothing to continue)."""
+        from nonholonomic.analysis.periodic_continuation import continue_orbit
+        from nonholonomic.analysis.periodic_orbit import find_periodic_orbit
+        from nonholonomic.integration import MACHINE_EPSILON
+
+        share = 1.0 / (1 + bool(self.sweep_values))
+        first = None if progress is None else (lambda f: progress(share * f))
+        orbit = find_periodic_orbit(system, p, y0, self.surface, value=self.value, direction=self.direction,
+                                    period=self.period, level=self.level, coordinates=self.coordinates,
+                                    t_final=t_final, tolerance=tolerance, progress=first)
+        if not self.sweep_values or not orbit.closed:
+            return orbit, None
+        rest = None if progress is None else (lambda f: progress(share + (1 - share) * f))
+        branch = continue_orbit(system, orbit, self.sweep_parameter or "", self.sweep_values, self.sweep_vectors,
+                                tolerance=MACHINE_EPSILON if tolerance is None else tolerance, progress=rest)
+        return orbit, branch

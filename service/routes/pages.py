@@ -27,7 +27,7 @@ router = APIRouter()
 PAGE_MEMBERS = 50
 #: Rendered plots kept in memory (finished jobs and ensembles only).
 PLOT_CACHE_SIZE = 64
-JobPlotName = Literal["trajectory", "integrals", "poincare", "lyapunov"]
+JobPlotName = Literal["trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit"]
 EnsemblePlotName = Literal["poincare", "exponents", "map"]
 PlotFormat = Literal["png", "svg"]
 _HTML = media_responses(["text/html"], "the page")
@@ -106,7 +106,7 @@ def report_html(record: JobRecord) -> HTMLResponse:
             responses={**_IMAGE, **problem_responses({404: "unknown job id",
                                                       409: "the job has not succeeded, or asked for no such analysis",
                                                       422: "unknown plot name or format"})},
-            summary="A plot of a job's result (matplotlib): trajectory, integrals, poincare or lyapunov, PNG or SVG")
+            summary="A plot of a job's result (matplotlib): trajectory, integrals, poincare, lyapunov or periodic_orbit, PNG or SVG")
 def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Request) -> Response:
     record = _job(request, job_id)
     if record.status != "succeeded" or record.result is None:

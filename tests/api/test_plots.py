@@ -13,7 +13,7 @@ import pytest
 from matplotlib.image import imread
 
 from nonholonomic.systems import SYSTEMS, get_system
-from service import plot_ensemble, plot_orbit, plots
+from service import plot_ensemble, plot_orbit, plot_periodic, plots
 from service.plots import PNG_DPI, PlotUnavailable, ensemble_plot, job_plot
 from tests.api.conftest import BALL, STATE
 from tests.support import poll_job
@@ -27,6 +27,7 @@ BALL_JOB = {
     "initial_state": dict(STATE), "t_final": 200.0, "samples": 401, "checks": ["integrals"],
     "poincare": {"surface": "gamma3", "value": 0.0, "direction": "increasing", "coordinates": ["gamma1", "M3"]},
     "lyapunov": {"interval": 1.0},
+    "periodic_orbit": {"surface": "gamma3", "coordinates": ["gamma1", "M3"]},
 }
 
 
@@ -74,14 +75,16 @@ def _expected_size(fig) -> tuple[int, int]:
 def test_every_job_plot_renders_png_of_its_size_and_svg_with_labels(ball, name):
     result, request = ball
     png = job_plot(name, result, request, "png")
-    assert _png_size(png) == _expected_size(plots._JOB_FIGURES[name](result, request))
+    figures = {**plots._JOB_FIGURES, "periodic_orbit": plot_periodic.periodic_orbit_figure}
+    assert _png_size(png) == _expected_size(figures[name](result, request))
     texts = _svg_texts(job_plot(name, result, request, "svg"))
-    assert "t [s]" in texts or name == "poincare"  # time axis with its unit
+    assert "t [s]" in texts or name in ("poincare", "periodic_orbit")  # time axis with its unit
     assert "Chaplygin's ball" in texts and "chaplygin_ball" in texts  # the title names the system
     expected = {"trajectory": ["γ₁ [1]", "γ₃ [1]", "M [kg m^2/s]", "eq. 2604-1", "|gamma| = 1"],
                 "integrals": ["H = (M, omega)/2 + U(gamma)", "c = (M, gamma)", "verdict tolerance 1e-10"],
                 "poincare": ["γ₁ [1]", "M₃ [kg m^2/s]", "gamma3 = 0", "increasing"],
-                "lyapunov": ["λ₁ = ", "1/s", "[1/s]"]}[name]
+                "lyapunov": ["λ₁ = ", "1/s", "[1/s]"],
+                "periodic_orbit": ["Re μ", "Im μ", "unit circle", "period-1 orbit", "gamma3 = 0"]}[name]
     for label in expected:
         assert label in texts, (label, texts)
 
