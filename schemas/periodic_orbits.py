@@ -112,6 +112,7 @@ class NewtonInfo(BaseModel):
     singular_ratio: float | None = Field(description="smallest / largest singular value of the closing equations' "
                                                      "Jacobian at the solution (0: a family of orbits)")
     family_dimension: int
+    wall_time_s: float = Field(description="the search's time, without the seed's crossings and the checks")
 
 
 class ContinuationPoint(BaseModel):
@@ -205,7 +206,7 @@ def orbit_to_json(system: MechanicalSystem, orbit: Any) -> dict[str, Any]:
         "newton": {"method": orbit.method, "wandered": orbit.wandered,
                    "residuals": [_finite(r) for r in orbit.iterations], "evaluations": orbit.evaluations,
                    "taylor_steps": orbit.steps, "singular_ratio": _finite(orbit.singular_ratio),
-                   "family_dimension": orbit.family_dimension},
+                   "family_dimension": orbit.family_dimension, "wall_time_s": orbit.search_time_s},
         "wall_time_s": orbit.wall_time_s, "warnings": list(orbit.warnings),
         "units": {"period_t": "s", "crossing_times": "s", **({"period_tau": reduced.unit} if reduced else {})},
         "continuation": None,

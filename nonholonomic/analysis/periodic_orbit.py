@@ -91,7 +91,8 @@ class PeriodicOrbit:
     periodic orbits: ``reason`` says which), ``not_found`` (``reason``; ``initial_state`` is the best
     point reached). ``multipliers`` and ``section_multipliers`` are complex arrays; ``residual`` is the
     closing error max|x(T) − x₀| / max(1, max|x₀|) of the solver's last integration,
-    ``residual_independent`` that of scipy's DOP853.
+    ``residual_independent`` that of scipy's DOP853. ``search_time_s``: Newton's part of ``wall_time_s``
+    (the rest: the seed's crossings and the checks).
     """
 
     status: str
@@ -123,6 +124,7 @@ class PeriodicOrbit:
     evaluations: int = 0
     steps: int = 0
     wall_time_s: float = 0.0
+    search_time_s: float = 0.0
     warnings: tuple[str, ...] = ()
 
     @property
@@ -241,11 +243,13 @@ def refine(system: MechanicalSystem, p: np.ndarray, x0: np.ndarray, period_t: fl
     scale = max(1.0, float(np.max(np.abs(x0))))
     closing = Closing(system, p, r, targets, tolerance, CancelCheck(progress, 2 * NEWTON_ITERATIONS
                                                                      + FALLBACK_EVALUATIONS), scale)
+    searching = time.perf_counter()
     search = solve(closing, np.append(x0, period_t))
     n = system.dimension
     x, t = search.z[:n].copy(), float(search.z[n])
     common = dict(iterations=tuple(search.history), method=search.method, wandered=search.wandered,
-                  evaluations=closing.evaluations, steps=closing.steps)
+                  evaluations=closing.evaluations, steps=closing.steps,
+                  search_time_s=time.perf_counter() - searching)
     if not search.residual <= CLOSING_TOLERANCE:
         why = f" ({search.wandered})" if search.wandered else ""
         return PeriodicOrbit(
