@@ -37,6 +37,7 @@ class CatalogPotential(_Strict):
     parameters: list[CatalogParameter]
     levels: list[str] = Field(description="integrals a {'sample': {'level': {...}}} of an ensemble may fix")
     sampling: str = Field(description="how states on a level set are drawn")
+    explore: str | None = Field(None, description="the page where its section can be clicked (/explore?...)")
 
 
 class CatalogExpressionPotential(_Strict):

@@ -29,6 +29,7 @@ from service.isolated import start_fork_server
 from service.limits import BodyLimit
 from service.routes import (
     ensembles,
+    explore,
     health,
     jobs,
     maps,
@@ -95,7 +96,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
              "responses": problem_responses({401: "API keys are on and none, or an unknown one, was sent",
                                              429: "the key's rate limit; `Retry-After` says when to retry"})}
     for router in (systems.router, jobs.router, ensembles.router, symbolic.router, maps.router, report.router,
-                   pages.router):
+                   pages.router, explore.router):
         app.include_router(router, **keyed)  # type: ignore[arg-type]
     app.mount(STATIC_URL, StaticFiles(packages=[("service", "static")]), name="static")
     _redoc(app)

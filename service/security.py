@@ -7,6 +7,8 @@ DENY`` and a ``Content-Security-Policy`` chosen by the answer's media type:
 
 - HTML pages (job, ensemble, report): :data:`PAGE_POLICY`: nothing but the service's own stylesheet
   and images (the plots), no script at all, no form, no frame;
+- the section explorer (``/explore``): :data:`EXPLORE_POLICY`, set by its route: the same plus its one script
+  from the service (``/static/explore.js``) and requests to the service (``connect-src 'self'``);
 - ``/docs`` and ``/redoc`` (Swagger UI and ReDoc from the package's files): :data:`DOCS_POLICY`, looser:
   their scripts from the service plus the page's inline configuration script, allowed by its SHA-256
   (computed from the page itself), inline styles (both inject ``<style>``), ``data:`` images (Swagger
@@ -28,6 +30,9 @@ API_POLICY = "default-src 'none'; frame-ancestors 'none'"
 #: The job, ensemble and report pages: the stylesheet and images (plots, favicon) from the service.
 PAGE_POLICY = ("default-src 'none'; style-src 'self'; img-src 'self'; base-uri 'none'; form-action 'none'; "
                "frame-ancestors 'none'")
+#: The section explorer: its own script from the service, and its requests back to the service.
+EXPLORE_POLICY = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; connect-src 'self'; "
+                  "base-uri 'none'; form-action 'none'; frame-ancestors 'none'")
 #: A plot's SVG viewed on its own: its inline ``<style>``, nothing else (no script).
 SVG_POLICY = "default-src 'none'; style-src 'unsafe-inline'; frame-ancestors 'none'"
 #: Swagger UI and ReDoc; ``{scripts}`` becomes the hashes of the page's inline scripts.

@@ -13,6 +13,7 @@ from nonholonomic.systems.lagrangian import KIND as LAGRANGIAN
 from schemas.catalog import Catalog, CatalogGeneralizedChaplygin, CatalogLagrangian, SystemDescription
 from schemas.problems import NOT_FOUND
 from service.errors import ProblemError, did_you_mean, problem_responses
+from service.explore import explorable
 from service.openapi import operation_id
 
 router = APIRouter(prefix="/v1/systems", tags=["systems"], generate_unique_id_function=operation_id)
@@ -21,7 +22,15 @@ router = APIRouter(prefix="/v1/systems", tags=["systems"], generate_unique_id_fu
 @router.get("", operation_id="systems-list", response_model=Catalog, response_model_exclude_unset=True,
             summary="The catalog: kinds, parameters, state, potentials, integrals, checks")
 def list_systems() -> dict[str, Any]:
-    return catalog()
+    whole = catalog()
+    return {**whole, "systems": [_linked(entry) for entry in whole["systems"]]}
+
+
+def _linked(entry: dict[str, Any]) -> dict[str, Any]:
+    """A kind's entry with, for each potential the explorer can draw, the link to its page (``/explore``)."""
+    drawable = explorable().get(entry["kind"], [])
+    return {**entry, "potentials": [{**pot, "explore": f"/explore?kind={entry['kind']}&potential={pot['kind']}"}
+                                    if pot["kind"] in drawable else pot for pot in entry["potentials"]]}
 
 
 @router.get("/{kind}", operation_id="systems-get",
@@ -35,7 +44,7 @@ def get_system(kind: str) -> dict[str, Any]:
     the request writes itself) as the catalog's entries of those names, a ``CatalogGeneralizedChaplygin`` and a
     ``CatalogLagrangian``."""
     if kind in SYSTEMS:
-        return describe(kind)
+        return _linked(describe(kind))
     if kind in (GENERALIZED_CHAPLYGIN, LAGRANGIAN):
         return catalog()[kind]  # type: ignore[no-any-return]
     known = [*SYSTEMS, GENERALIZED_CHAPLYGIN, LAGRANGIAN]

@@ -52,6 +52,9 @@ SEMANTIC_422 = {
     "symbolic-hamiltonize": "expressions must parse and be consistent (names, dimensions) within the budget",
     "symbolic-brackets-verify": "expressions must parse within the budget; the matrix must be square in the variables",
     "paper-report-submit": "claim ids are the catalog's (GET /v1/paper/claims); the schema has no enum of them yet",
+    "explore-plane": "the section's components and level must be the system's, and fix finitely many states",
+    "explore-orbit": "as explore-plane, and the point must lie inside the level (a state crosses there)",
+    "explore-periodic-orbit": "as explore-orbit",
 }
 #: Seconds granted to symbolic work in a fuzzed request (the schema allows up to 30).
 SYMBOLIC_BUDGET_S = 1.0

@@ -8,6 +8,8 @@ events and console errors). A screenshot of each goes to ``$NONHOLONOMIC_TEST_OU
 from __future__ import annotations
 
 import os
+import re
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from urllib.parse import urlparse
@@ -15,7 +17,7 @@ from urllib.parse import urlparse
 import httpx
 import pytest
 
-from service.security import DOCS_POLICY, PAGE_POLICY, SVG_POLICY
+from service.security import DOCS_POLICY, EXPLORE_POLICY, PAGE_POLICY, SVG_POLICY
 from tests.support import ROOT, free_port, poll_job, start_api, stop, wait_healthy
 
 pytestmark = pytest.mark.integration
@@ -301,3 +303,52 @@ def test_docs_and_redoc_on_a_named_host_ask_nothing_from_elsewhere(api, browser)
     redoc = Visit(browser, f"{named}/redoc", DOCS_POLICY)
     redoc.page.wait_for_selector("[data-section-id]", timeout=60_000)
     redoc.finish("redoc-named-host", named)
+
+
+def _until(page, expression: str, timeout: float = 30.0) -> float:
+    """Seconds until ``expression`` is true in the page (polled every 10 ms: ``wait_for_function`` evaluates a
+    string, which the page's CSP refuses); ``timeout`` is a hang guard."""
+    start = time.perf_counter()
+    while not page.evaluate(expression):
+        assert time.perf_counter() - start < timeout, f"not within {timeout} s: {expression}"
+        page.wait_for_timeout(10)
+    return time.perf_counter() - start
+
+
+def _click(page, u: float, v: float, shift: bool = False) -> None:
+    """Click the plane at the point (u, v) of its coordinates (the page says where it draws it)."""
+    x, y = page.evaluate(f"window.explorer.pixelOf({u}, {v})")
+    scale = page.evaluate("(c => c.clientWidth / c.width)(document.getElementById('plane'))")
+    page.locator("#plane").click(position={"x": x * scale + 1, "y": y * scale + 1},  # + its 1 px border
+                                 modifiers=["Shift"] if shift else [])
+
+
+def test_explore_page_draws_a_clicked_orbit_and_a_shift_clicked_periodic_orbit(api, browser):
+    """The ball in a linear field on gamma3 = 0 in (gamma1, M3): the page draws the plane, a click inside the
+    island draws its crossings as they stream in (at least 100 of them; the time to the 100th is written to
+    the test output, the 1-s figure is measured by bench/bench_explore.py), a shift-click marks the island's
+    centre with its multipliers; no error, no CSP violation."""
+    visit = Visit(browser, f"{api}/explore?kind=chaplygin_ball&potential=linear", EXPLORE_POLICY)
+    page = visit.page
+    _until(page, "document.getElementById('plane').dataset.ready === '1'")
+    assert page.locator("#surface").input_value() == "gamma3" and page.locator("#coord1").input_value() == "M3"
+    done = ("(li => li !== null && li.textContent.includes('crossings') && !li.textContent.includes('…'))"
+            "(document.querySelector('#orbits li:nth-child({})'))")
+    _click(page, -0.2, 0.0)  # a first click: warms the service's integrator
+    _until(page, done.format(1))
+    before = int(page.evaluate("document.getElementById('plane').dataset.points"))
+    assert before > 300  # t = 2000: ~387 crossings
+    _click(page, -0.5, 1.0)
+    seconds = _until(page, f"Number(document.getElementById('plane').dataset.points) >= {before + 100}")
+    _until(page, done.format(2))
+    second = page.locator("#orbits li").nth(1).inner_text()
+    u, v = (float(c) for c in re.search(r"from \(([-\d.e]+), ([-\d.e]+)\)", second).groups())
+    assert abs(u + 0.5) < 0.01 and abs(v - 1.0) < 0.04, second  # within two pixels of the click
+    assert "crossings, t = 2000" in second, second
+    _click(page, -0.2, 0.0, shift=True)
+    _until(page, "document.querySelectorAll('#orbits li').length >= 3")
+    star = page.locator("#orbits li").nth(2).inner_text()
+    assert "period-1 orbit (found)" in star and "elliptic" in star and "T = 5.1598 s" in star, star
+    OUTPUT.mkdir(parents=True, exist_ok=True)
+    (OUTPUT / "explore-latency.txt").write_text(f"100 crossings drawn {seconds:.3f} s after a click (warm)\n")
+    visit.finish("explore", api)
