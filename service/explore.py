@@ -93,11 +93,12 @@ def _integrate(run: Exploration, p: np.ndarray, plane: ExploreSection) -> None:
             keep = sec.t > RESTART_T
             new = sec.coordinates[keep][:want]
             run.points.extend(new.tolist())
-            if not len(new) or not sec.stopped_early:
-                run.t_reached = run.t_final if not sec.stopped_early else t0 + float(sec.t[-1]) if sec.count else t0
+            if not sec.stopped_early or not len(new):  # t_final reached
+                run.t_reached = run.t_final
                 break
-            x = crossing_states(run.system, sec)[keep][len(new) - 1]
-            t0 += float(sec.t[keep][len(new) - 1])
+            last = len(new) - 1  # the next piece starts from this crossing
+            x = crossing_states(run.system, sec)[keep][last]
+            t0 += float(sec.t[keep][last])
             run.t_reached = t0
             piece = PIECE
     except (IntegrationError, ValueError) as exc:

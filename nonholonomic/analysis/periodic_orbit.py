@@ -213,10 +213,14 @@ def find_periodic_orbit(
     p = np.asarray(parameters, dtype=float)
     x_seed = np.asarray(seed, dtype=float)
     start = time.perf_counter()
-    sec = section(system, p, x_seed, t_final, surface, value=value, direction=direction, max_points=period + 1,
-                  tolerance=tol)
     targets = level_values(system, p, x_seed, value, chosen, rows(system, surface, chosen))
     level_map = dict(zip(chosen, targets[1: 1 + len(chosen)].tolist()))
+    try:
+        sec = section(system, p, x_seed, t_final, surface, value=value, direction=direction,
+                      max_points=period + 1, tolerance=tol)
+    except IntegrationError as exc:
+        return PeriodicOrbit("not_found", f"the seed's integration failed: {exc}", surface, value, direction, period,
+                             level_map, x_seed, float("nan"), wall_time_s=time.perf_counter() - start)
     if sec.count < period + 1:
         return PeriodicOrbit(
             "not_found", f"the seed's orbit crosses {surface} = {value:g} ({direction}) {sec.count} time(s) before "

@@ -59,7 +59,8 @@ SEMANTIC_422 = {
 #: Seconds granted to symbolic work in a fuzzed request (the schema allows up to 30).
 SYMBOLIC_BUDGET_S = 1.0
 #: Fewer examples for the expensive operations (per operation id; fuzzing phase).
-FEW = {"paper-report-submit": 4, "symbolic-hamiltonize": 10, "symbolic-brackets-verify": 10}
+FEW = {"paper-report-submit": 4, "symbolic-hamiltonize": 10, "symbolic-brackets-verify": 10,
+       "explore-periodic-orbit": 6}  # a valid one runs a Newton search in the request
 MAX_EXAMPLES = 12
 
 BALL_JOB = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
