@@ -107,11 +107,15 @@ def _integrate(run: Exploration, p: np.ndarray, plane: ExploreSection) -> None:
         run.done = True
 
 
+_MADE = threading.Lock()
+
+
 def explorations(app_state: Any) -> Explorations:
-    """The process's runs (made on first use)."""
-    found = getattr(app_state, "explorations", None)
-    if found is None:
-        found = app_state.explorations = Explorations()
+    """The app's runs (made on first use, once)."""
+    with _MADE:
+        found = getattr(app_state, "explorations", None)
+        if found is None:
+            found = app_state.explorations = Explorations()
     return found
 
 
