@@ -21,6 +21,7 @@ from nonholonomic.analysis.indicators import thresholds_for
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem, initial_state_problems, project_initial_state
 from nonholonomic.kernels import parameter_vector, state_vector
+from nonholonomic.refusals import RefusedField
 from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems, t_final_within_limit
 from schemas.results import MemberResultModel
@@ -374,12 +375,8 @@ class EnsembleRequest(BaseModel):
         return y
 
 
-class LevelProblem(ValueError):
+class LevelProblem(RefusedField):
     """A level set that cannot be sampled, with the request field that says so."""
-
-    def __init__(self, field: str, reason: str) -> None:
-        super().__init__(f"{field}: {reason}")
-        self.field, self.reason = field, reason
 
 
 class EnsembleAccepted(BaseModel):

@@ -6,7 +6,7 @@ and the section's value fix three components, the system's constraints and the l
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
@@ -146,9 +146,3 @@ class ExplorationAccepted(BaseModel):
     location: str
     initial_state: dict[str, list[float]]
     branches: int
-
-
-def named_state(system: MechanicalSystem, x: np.ndarray) -> dict[str, Any]:
-    from nonholonomic.initial_state import vector_slice
-
-    return {v.name: [float(c) for c in x[vector_slice(system, v.name)]] for v in system.state}

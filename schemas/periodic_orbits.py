@@ -184,7 +184,8 @@ def _multipliers(mu: np.ndarray) -> list[dict[str, float]]:
     return [{"re": float(m.real), "im": float(m.imag), "modulus": float(abs(m))} for m in mu]
 
 
-def _named(system: MechanicalSystem, x: np.ndarray) -> dict[str, list[float]]:
+def named_state(system: MechanicalSystem, x: np.ndarray) -> dict[str, list[float]]:
+    """A state vector by the system's vector names (``{"M": [..], "gamma": [..]}``)."""
     return {v.name: [float(c) for c in x[vector_slice(system, v.name)]] for v in system.state}
 
 
@@ -194,7 +195,7 @@ def orbit_to_json(system: MechanicalSystem, orbit: Any) -> dict[str, Any]:
     return {
         "status": orbit.status, "reason": orbit.reason, "surface": orbit.surface, "value": orbit.value,
         "direction": orbit.direction, "period": orbit.period, "level": dict(orbit.level),
-        "initial_state": _named(system, orbit.initial_state), "period_t": _finite(orbit.period_t),
+        "initial_state": named_state(system, orbit.initial_state), "period_t": _finite(orbit.period_t),
         "period_tau": _finite(orbit.period_tau), "coordinate_names": list(orbit.coordinate_names),
         "coordinates": list(orbit.coordinates), "crossing_times": list(orbit.crossing_times),
         "multipliers": _multipliers(orbit.multipliers), "trivial_count": orbit.trivial_count,
@@ -219,7 +220,7 @@ def branch_to_json(system: MechanicalSystem, branch: Any) -> dict[str, Any]:
     for value, orbit in zip(branch.values, branch.orbits):
         decided = [c.passed for c in orbit.checks if c.passed is not None]
         points.append({"value": float(value), "status": orbit.status, "period_t": _finite(orbit.period_t),
-                       "initial_state": _named(system, orbit.initial_state),
+                       "initial_state": named_state(system, orbit.initial_state),
                        "section_multipliers": _multipliers(orbit.section_multipliers), "trace": _finite(orbit.trace),
                        "stability": orbit.stability, "residual": _finite(orbit.residual),
                        "checks_passed": all(decided) if decided else None, "reason": orbit.reason})

@@ -40,6 +40,7 @@ from nonholonomic.analysis.sampling import RECIPES, LevelError, fixable, on_leve
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import vector_slice
 from nonholonomic.kernels import NumericSystem, VectorKernel, numeric, vectorize
+from nonholonomic.refusals import RefusedField
 
 #: States drawn on the level to estimate the region it allows (the default ``ranges``).
 RANGE_SAMPLES = 20000
@@ -47,12 +48,8 @@ RANGE_SAMPLES = 20000
 RANGE_MARGIN = 0.02
 
 
-class GridError(ValueError):
+class GridError(RefusedField):
     """A grid that cannot be built, with the request field (relative to ``members.grid``) and why."""
-
-    def __init__(self, field: str, reason: str) -> None:
-        super().__init__(f"{field}: {reason}")
-        self.field, self.reason = field, reason
 
 
 @dataclass(frozen=True)

@@ -80,14 +80,10 @@ def rows(system: MechanicalSystem, surface: str, level: tuple[str, ...]) -> Rows
     return Rows(names, vectorize(exprs, args), vectorize(grads, args), targets)
 
 
+@lru_cache(maxsize=32)
 def integral_gradients(system: MechanicalSystem) -> VectorKernel:
     """∇I of every first integral and ∇C of every constraint, flattened row-major (for the trivial
     multipliers' count: 1 + their rank at the orbit)."""
-    return _integral_gradients(system)
-
-
-@lru_cache(maxsize=32)
-def _integral_gradients(system: MechanicalSystem) -> VectorKernel:
     exprs = [i.expression for i in system.integrals] + [c.expression for c in system.constraints]
     state = system.state_symbols
     return vectorize([sp.diff(e, s) for e in exprs for s in state] or [sp.Integer(0)],
@@ -267,8 +263,7 @@ def solve(closing: Closing, z0: np.ndarray) -> Search:
     return Search(z, r, history, "newton, then levenberg-marquardt", wandered)
 
 
-def level_values(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, surface_value: float,
-                 level: Sequence[str], r: Rows) -> np.ndarray:
+def level_values(p: np.ndarray, x: np.ndarray, surface_value: float, level: Sequence[str], r: Rows) -> np.ndarray:
     """The rows' targets at a seed ``x``: the section's value, the seed's integrals, the constraints' values."""
     values = r.values(x[None, :], p)[0]
     targets = np.array([surface_value] + [float(v) for v in values[1: 1 + len(level)]]

@@ -52,6 +52,7 @@ from nonholonomic.analysis.sampling import fixable
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE, IntegrationError, integrate
 from nonholonomic.kernels import numeric
+from nonholonomic.refusals import RefusedField
 
 #: A solution whose Jacobian's singular values have a ratio below this lies on a family of periodic orbits.
 DEGENERATE_BELOW = 1e-8
@@ -63,12 +64,8 @@ PRODUCT_TOLERANCE = 1e-9
 MAX_PERIOD = 64
 
 
-class PeriodicOrbitError(ValueError):
+class PeriodicOrbitError(RefusedField):
     """A request that cannot be searched, with the field (relative to ``periodic_orbit``) and why."""
-
-    def __init__(self, field: str, reason: str) -> None:
-        super().__init__(f"{field}: {reason}")
-        self.field, self.reason = field, reason
 
 
 @dataclass(frozen=True)
@@ -213,7 +210,7 @@ def find_periodic_orbit(
     p = np.asarray(parameters, dtype=float)
     x_seed = np.asarray(seed, dtype=float)
     start = time.perf_counter()
-    targets = level_values(system, p, x_seed, value, chosen, rows(system, surface, chosen))
+    targets = level_values(p, x_seed, value, chosen, rows(system, surface, chosen))
     level_map = dict(zip(chosen, targets[1: 1 + len(chosen)].tolist()))
     try:
         sec = section(system, p, x_seed, t_final, surface, value=value, direction=direction,
@@ -242,7 +239,7 @@ def refine(system: MechanicalSystem, p: np.ndarray, x0: np.ndarray, period_t: fl
     start = time.perf_counter() if started is None else started
     chosen = tuple(level)
     r = rows(system, surface, chosen)
-    targets = level_values(system, p, x0, value, chosen, r)
+    targets = level_values(p, x0, value, chosen, r)
     level_map = dict(zip(chosen, targets[1: 1 + len(chosen)].tolist()))
     scale = max(1.0, float(np.max(np.abs(x0))))
     closing = Closing(system, p, r, targets, tolerance, CancelCheck(progress, 2 * NEWTON_ITERATIONS

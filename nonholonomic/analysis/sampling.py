@@ -58,6 +58,7 @@ import numpy as np
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import vector_slice
 from nonholonomic.kernels import numeric
+from nonholonomic.refusals import RefusedField
 
 #: Candidates drawn per batch (fixed: the random stream and hence the samples do not depend on count).
 BATCH = 2048
@@ -69,7 +70,7 @@ EARLY_GIVE_UP = 100_000
 TOLERANCE = 1e-12
 
 
-class LevelError(ValueError):
+class LevelError(RefusedField):
     """A ``sample`` request that cannot be met.
 
     Attributes
@@ -79,11 +80,6 @@ class LevelError(ValueError):
     reason : str
         Why, in words (with the fixable names or the bound the level misses).
     """
-
-    def __init__(self, field: str, reason: str) -> None:
-        super().__init__(f"{field}: {reason}")
-        self.field = field
-        self.reason = reason
 
 
 # --- draws ----------------------------------------------------------------------------------------

@@ -45,6 +45,7 @@ from nonholonomic.definition import (
 from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, smooth_potential
+from nonholonomic.refusals import RefusedField
 
 KIND = "generalized_chaplygin"
 TITLE = "Generalized Chaplygin system with two degrees of freedom, written by the user"
@@ -72,12 +73,8 @@ EXAMPLE_JOB: dict[str, Any] = {"system": EXAMPLE, "initial_state": {"q": [0.7, 0
                                "t_final": 50.0, "samples": 101, "checks": ["integrals", "measure", "bracket"]}
 
 
-class DataError(ValueError):
+class DataError(RefusedField):
     """A field of the user's system that cannot be used, with the field's name."""
-
-    def __init__(self, field: str, reason: str) -> None:
-        super().__init__(f"{field}: {reason}")
-        self.field, self.reason = field, reason
 
 
 @dataclass(frozen=True)

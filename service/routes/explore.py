@@ -23,11 +23,10 @@ from schemas.explore import (
     ExplorePeriodicRequest,
     ExplorePlaneRequest,
     clicked_state,
-    named_state,
     plane_problems,
     plane_ranges,
 )
-from schemas.periodic_orbits import orbit_to_json
+from schemas.periodic_orbits import named_state, orbit_to_json
 from schemas.problems import NOT_FOUND, FieldError
 from schemas.results import system_units
 from service.errors import INVALID, ProblemError, invalid_request, problem_responses
