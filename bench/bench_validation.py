@@ -1,12 +1,13 @@
 """/health while the audit's expensive expressions are validated (issue 19, item 1).
 
-    .venv/bin/python bench/bench_validation.py [--rounds 3] [--budget 5]
+    .venv/bin/python bench/bench_validation.py [--rounds 3] [--cap 120]
 
 Starts the API (embedded mode, uvicorn) and posts, ``--rounds`` times, the three bodies of the audit at
 once: a Poincaré surface ``(M1+gamma2+gamma3+1)**64`` (152 s to answer on main), a surface Phi of 59
 nested sin (51 s) and a potential that is a long sum of distinct terms (16 s). A process of its own
 polls ``GET /health`` every 20 ms meanwhile. Prints each POST's status and seconds and /health's p50,
-p99 and max (the goal: p99 <= 100 ms; the POSTs within validation_budget_s + a few seconds).
+p99 and max (the goal: p99 <= 100 ms). The first two are refused at once by deterministic measures of their
+work (422), the third is read to its end (202); ``--cap`` is the validation's safety cap (a 503 past it).
 """
 
 from __future__ import annotations
@@ -47,12 +48,12 @@ def _post(base: str, field: str, body: dict, out: list[tuple[str, int, float, st
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3, help="times the three bodies are posted (at once)")
-    parser.add_argument("--budget", type=float, default=5.0, help="NONHOLONOMIC_VALIDATION_BUDGET_S")
+    parser.add_argument("--cap", type=float, default=120.0, help="NONHOLONOMIC_VALIDATION_SAFETY_CAP_S")
     args = parser.parse_args()
     port = free_port()
     log = Path(tempfile.mkdtemp(prefix="bench-validation-")) / "api.log"
     api = start_api(port, log, {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false",
-                                "NONHOLONOMIC_VALIDATION_BUDGET_S": str(args.budget)})
+                                "NONHOLONOMIC_VALIDATION_SAFETY_CAP_S": str(args.cap)})
     base = f"http://127.0.0.1:{port}"
     prober = None
     try:
@@ -74,7 +75,7 @@ def main() -> int:
         if prober is not None:
             prober.kill()
         stop(api)
-    print(f"load: {os.getloadavg()[0]:.1f} (1 min), budget {args.budget:g} s, {args.rounds} rounds of 3 POSTs")
+    print(f"load: {os.getloadavg()[0]:.1f} (1 min), safety cap {args.cap:g} s, {args.rounds} rounds of 3 POSTs")
     for field, status, seconds, reason in posts:
         print(f"  POST {field:20s} {status}  {seconds:6.2f} s  {reason}")
     ms = [1000 * s for s in health]

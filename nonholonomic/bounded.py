@@ -1,14 +1,20 @@
-"""Symbolic work under a time budget: one runner for every proof and computation in the core.
+"""Symbolic work run to its end: one runner for every proof and computation in the core.
 
-A computation runs in a daemon thread; the caller waits at most its budget and gets an
-:class:`Outcome` (``done``, ``error``, ``timeout`` or ``busy``). Identical calls (same key) share one
-thread and its result is cached per process, so a proof that outlived a budget answers the next call.
-A finished result whose key pickles is also remembered across processes when a memo is installed
-(:mod:`nonholonomic.memo`): a proof is done once per machine and version, not once per process.
+A verdict must depend on the question and the code only, never on how busy the machine is. So no
+clock decides anything here: a computation runs until it finishes (``done``) or sympy raises
+(``error``: the claim stays undecided, with sympy's reason). What keeps a computation small is decided
+*before* it starts, by deterministic measures of the work (expression sizes, degrees, unknowns of an
+ansatz: :mod:`nonholonomic.work_limits`), so a search that stops early says why in the same words on
+every machine.
 
-Python threads cannot be killed: a computation past its budget keeps its CPU until it ends. So at
-most :data:`MAX_RUNNING` computations run at once per process; past that a new one is refused
-(``busy``) instead of piling up behind runaway ones. Sympy work sent by users is bounded before it
+The clock is only a safety cap (:func:`safety_cap_s`, set by the service from its settings): a
+computation still running after it raises :class:`SafetyCapExceeded` in the caller, a failure of the job
+or request that says so, never a verdict. Python threads cannot be killed, so the computation itself goes
+on in its daemon thread and its result is kept: the next identical call gets the same verdict a quiet
+machine would have given.
+
+Identical calls (same key) share one thread; finished results are cached per process and, when a memo
+is installed (:mod:`nonholonomic.memo`), across processes. Sympy work sent by users is bounded before it
 gets here (expression size, depth and constants, :mod:`nonholonomic.expressions`).
 """
 
@@ -17,26 +23,56 @@ from __future__ import annotations
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Callable, Hashable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import Any
 
 from nonholonomic import memo
 
-#: Computations allowed to run at once in one process (including those past their budget).
+#: Computations run in threads of their own at once in one process; past that a computation runs in
+#: its caller's thread (same result, no safety cap of its own: the job's time limit still holds).
 MAX_RUNNING = 32
 #: Finished results kept per process (least recently used forgotten first).
 CACHE_SIZE = 1024
+#: Seconds a caller waits for one computation by default (:func:`set_safety_cap`).
+DEFAULT_SAFETY_CAP_S = 900.0
+
+_safety_cap_s = DEFAULT_SAFETY_CAP_S
+
+
+class SafetyCapExceeded(RuntimeError):
+    """A symbolic computation still running after the safety cap (:func:`safety_cap_s`).
+
+    Not a verdict: the job or request that waited fails with this message; the computation finishes in
+    the background and an identical later call gets its result."""
+
+    def __init__(self, what: str, seconds: float) -> None:
+        self.what, self.seconds = what, seconds
+        super().__init__(f"the symbolic step {what!r} did not finish within the service's safety cap of "
+                         f"{seconds:g} s (a time limit of the machine, not of the question: the machine may be "
+                         "overloaded); no verdict was given, and the same request later gets the answer")
+
+    def __reduce__(self) -> tuple[type, tuple[str, float]]:  # crosses process boundaries (a worker's result)
+        return type(self), (self.what, self.seconds)
+
+
+def set_safety_cap(seconds: float) -> None:
+    """Wait at most ``seconds`` for one computation from now on in this process."""
+    global _safety_cap_s
+    _safety_cap_s = max(float(seconds), 0.001)
+
+
+def safety_cap_s() -> float:
+    """Seconds a caller waits for one computation before :class:`SafetyCapExceeded`."""
+    return _safety_cap_s
 
 
 @dataclass(frozen=True)
 class Outcome:
-    """What a bounded computation gave.
+    """What a computation gave.
 
-    ``status`` is ``"done"`` (``value`` holds the result), ``"error"`` (``message`` says what sympy
-    raised), ``"timeout"`` (still running in the background) or ``"busy"`` (not started: too many
-    computations running). ``seconds`` is the computation's own run time when it finished.
+    ``status`` is ``"done"`` (``value`` holds the result) or ``"error"`` (``message`` says what sympy
+    raised). ``seconds`` is the computation's own run time (a timing field: never part of a verdict).
     """
 
     status: str
@@ -48,18 +84,19 @@ class Outcome:
 
 
 class _Task:
-    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...], memo_key: str | None = None) -> None:
+    def __init__(self, fn: Callable[..., Any], args: tuple[Any, ...], what: str, memo_key: str | None = None) -> None:
         self.done = threading.Event()
         self.value: Any = None
         self.error = ""
+        self.capped: SafetyCapExceeded | None = None
         self.seconds = 0.0
         self.remembered = False
+        self.what = what
+        self._fn, self._args = fn, args
         self._memo_key = memo_key
-        self._thread = threading.Thread(target=self._run, args=(fn, args), daemon=True,
-                                        name=f"bounded-{getattr(fn, '__name__', 'task')}")
 
     def start(self) -> _Task:
-        self._thread.start()
+        threading.Thread(target=self.run, daemon=True, name=f"bounded-{self.what}").start()
         return self
 
     def recalled(self, value: Any, seconds: float) -> _Task:
@@ -68,24 +105,26 @@ class _Task:
         self.done.set()
         return self
 
-    def _run(self, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+    def run(self) -> None:
         start = time.perf_counter()
         try:
-            self.value = fn(*args)
+            self.value = self._fn(*self._args)
+        except SafetyCapExceeded as exc:  # an inner step's cap: the caller fails too, nothing is cached
+            self.capped = exc
         except Exception as exc:  # a sympy failure leaves the claim undecided, not the caller failed
             self.error = f"{type(exc).__name__}: {exc}"
         self.seconds = time.perf_counter() - start
         try:
-            if self._memo_key is not None and not self.error:  # before done: a waiter's exit cannot cut it
-                memo.keep(self._memo_key, (self.value, self.seconds))
+            if self._memo_key is not None and not self.error and self.capped is None:
+                memo.keep(self._memo_key, (self.value, self.seconds))  # before done: a waiter's exit cannot cut it
         finally:
             self.done.set()
 
-    def outcome(self, budget_s: float) -> Outcome:
-        budget_s = max(float(budget_s), 0.0)
-        if not self.done.wait(budget_s):
-            return Outcome("timeout", None, budget_s,
-                           f"did not finish within {budget_s:.3g} s (it continues in the background)")
+    def outcome(self) -> Outcome:
+        if not self.done.wait(_safety_cap_s):
+            raise SafetyCapExceeded(self.what, _safety_cap_s)
+        if self.capped is not None:
+            raise self.capped
         if self.error:
             return Outcome("error", None, self.seconds, self.error)
         return Outcome("done", self.value, self.seconds, remembered=self.remembered)
@@ -99,9 +138,14 @@ def _running() -> int:
     return sum(1 for t in _tasks.values() if not t.done.is_set())
 
 
-def start(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...] = ()) -> _Task | None:
+def _name(fn: Callable[..., Any]) -> str:
+    return str(getattr(fn, "__qualname__", getattr(fn, "__name__", "task")))
+
+
+def start(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...] = ()) -> _Task:
     """The task for ``key``: a running or finished one, one finished at once with what an earlier
-    process remembered, else one started now; None if :data:`MAX_RUNNING` are running."""
+    process remembered, else one started now (in a thread of its own, or, past :data:`MAX_RUNNING`
+    running ones, run here and now)."""
     with _lock:
         task = _tasks.get(key)
         if task is not None:
@@ -109,90 +153,64 @@ def start(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...] = ()) -> 
             return task
     memo_key = memo.key_of("bounded", key) if memo.installed() else None
     found, kept = memo.recall(memo_key) if memo_key is not None else (False, None)
+    inline = False
     with _lock:
         task = _tasks.get(key)
         if task is not None:  # another thread started it meanwhile
             return task
-        if not found and _running() >= MAX_RUNNING:
-            return None
         while len(_tasks) >= CACHE_SIZE:
             finished = next((k for k, t in _tasks.items() if t.done.is_set()), None)
             if finished is None:
                 break
             del _tasks[finished]
-        task = _Task(fn, args, memo_key)
-        _tasks[key] = task.recalled(*kept) if found else task.start()
-        return task
+        task = _Task(fn, args, _name(fn), memo_key)
+        if found:
+            task.recalled(*kept)
+        elif _running() >= MAX_RUNNING:
+            inline = True
+        else:
+            task.start()
+        _tasks[key] = task
+    if inline:
+        task.run()
+    return task
 
 
-def run(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...], budget_s: float) -> Outcome:
-    """``fn(*args)`` waited on for at most ``budget_s`` seconds (shared and cached under ``key``)."""
+def run(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...] = ()) -> Outcome:
+    """``fn(*args)`` run to its end (shared and cached under ``key``).
+
+    Raises
+    ------
+    SafetyCapExceeded
+        Still running after :func:`safety_cap_s` seconds (the computation goes on; the key is forgotten
+        only if it failed through an inner cap).
+    """
     task = start(key, fn, args)
-    peek = getattr(_peeking, "on", False)
-    if task is None:
-        if not peek:
-            cut_short()
-        return Outcome("busy", None, 0.0, f"not started: {MAX_RUNNING} symbolic computations are already "
-                                          "running in this process; try again later")
-    outcome = task.outcome(budget_s)
-    if outcome.status == "timeout" and not peek:
-        cut_short()
-    return outcome
-
-
-_cut_short = 0
-_cut_lock = threading.Lock()
-_peeking = threading.local()
-
-
-@contextmanager
-def peeking() -> Iterator[None]:
-    """In this block (this thread), :func:`run` calls only start computations or read what is already
-    known (e.g. with a budget of 0, so that several proofs share one budget): their timeouts are not
-    counted by :func:`cut_short_count`; the call that waits for the verdict is."""
-    outer = getattr(_peeking, "on", False)
-    _peeking.on = True
     try:
-        yield
-    finally:
-        _peeking.on = outer
-
-
-def cut_short() -> None:
-    """Count a computation that a budget or a busy process left undone (:func:`run` counts its own;
-    code that skips a step because no budget is left calls this)."""
-    global _cut_short
-    with _cut_lock:
-        _cut_short += 1
-
-
-def cut_short_count() -> int:
-    """How many computations a budget or a busy process has left undone in this process so far.
-
-    A result assembled while this count did not move depends only on its inputs and the code, so it
-    may be remembered whole (a symbolic request's answer, the paper report); otherwise it depends on
-    the machine's load at the time and is not. Other threads' cuts count too: a false "cut" only
-    means a result is not remembered."""
-    return _cut_short
+        return task.outcome()
+    except SafetyCapExceeded:
+        if task.capped is not None:
+            with _lock:
+                if _tasks.get(key) is task:
+                    del _tasks[key]
+        raise
 
 
 def verdict(outcome: Outcome) -> tuple[bool | None, str, Any]:
     """A proof's ``(verdict, detail, payload)`` from its outcome.
 
-    A proof returns ``(verdict, detail)`` or ``(verdict, detail, payload)``; a timeout, a refusal
-    or a sympy error leaves the verdict None (undecided) with the reason in the detail.
+    A proof returns ``(verdict, detail)`` or ``(verdict, detail, payload)``; a sympy error leaves the
+    verdict None (undecided) with the reason in the detail. The detail holds no time: the same proof
+    gives the same words everywhere.
     """
     if outcome.status == "done":
         out = outcome.value
         payload = out[2] if len(out) > 2 else None
-        where = "remembered from an earlier process" if outcome.remembered else "cached per process"
-        return out[0], f"{out[1]} ({outcome.seconds:.2f} s, {where})", payload
-    if outcome.status == "error":
-        return None, f"sympy could not decide: {outcome.message}", None
-    return None, f"symbolic proof {outcome.message}", None
+        return out[0], str(out[1]), payload
+    return None, f"sympy could not decide: {outcome.message}", None
 
 
-def prove(key: Hashable, fn: Callable[..., tuple], args: tuple[Any, ...], budget_s: float) -> tuple[bool | None, str]:
-    """``(verdict, detail)`` of the proof ``fn(*args)`` within ``budget_s`` (see :func:`verdict`)."""
-    proven, detail, _ = verdict(run(key, fn, args, budget_s))
+def prove(key: Hashable, fn: Callable[..., tuple], args: tuple[Any, ...] = ()) -> tuple[bool | None, str]:
+    """``(verdict, detail)`` of the proof ``fn(*args)`` (see :func:`verdict`)."""
+    proven, detail, _ = verdict(run(key, fn, args))
     return proven, detail

@@ -42,8 +42,10 @@ s = (Γ, IΓ)^(1/2) (and ρ_ω = 1/s at from(y), checked). Ball: no restriction 
 holds on all of R⁶; J_i = c_i² leaves s = (1 − D (γ, J⁻¹γ))^(1/2). Every component's numerator,
 a polynomial A(s²) + s B(s²), is reduced with s² = radicand in a sparse polynomial ring over QQ;
 A = B = 0 proves it. Otherwise one exact evaluation (50 digits) at a random rational point with a
-non-zero value disproves it; if neither, the verdict is None. The proof runs under
-``budget_s`` and is cached per process (:mod:`nonholonomic.bounded`).
+non-zero value disproves it; if neither, the verdict is None. The proof runs to its end and is cached
+per process (:mod:`nonholonomic.bounded`); it is tried only on a form and field of at most
+``max_proof_ops`` sympy operations (:mod:`nonholonomic.work_limits`), else the verdict is None with
+that reason, the same on every machine.
 """
 
 from __future__ import annotations
@@ -55,18 +57,17 @@ from functools import lru_cache
 import numpy as np
 import sympy as sp
 
-from nonholonomic import bounded
+from nonholonomic import bounded, work_limits
 from nonholonomic.brackets import PoissonStructure, chaplygin_ball_bracket, e3
 from nonholonomic.definition import MechanicalSystem, dot
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.kernels import VectorKernel, numeric, vectorize
+from nonholonomic.work_limits import WorkLimits, operations, over
 
 #: Pointwise relative residual accepted as round-off.
 POINTWISE_TOLERANCE = 1e-10
 #: The original-time control "passes" (shows the time substitution is needed) above this residual.
 CONTROL_THRESHOLD = 1e-6
-#: Default seconds the symbolic proof may take.
-SYMBOLIC_BUDGET_S = 20.0
 #: Kinds with a Hamiltonian form here.
 KINDS = ("veselova", "chaplygin_ball")
 
@@ -454,15 +455,41 @@ def _disprove(residual: sp.Expr, leaf: _Leaf, tries: int = 50) -> tuple[bool | N
     return None, ""
 
 
-def symbolic_flow_identity(form: HamiltonianForm, system: MechanicalSystem,
-                           budget_s: float = SYMBOLIC_BUDGET_S) -> tuple[bool | None, str]:
-    """Whether the τ-pushforward equals ``{H, ·}`` identically on the leaf; None if undecided in budget.
+@lru_cache(maxsize=64)
+def _flow_size(form: HamiltonianForm, system: MechanicalSystem) -> int:
+    """Sympy operations of what the flow proof works on: the map, its inverse, H, dτ/dt and the field."""
+    return operations(*form.to_bracket_variables, *form.from_bracket_variables, form.hamiltonian,
+                      form.time_density, *system.rhs)
 
-    The proof keeps running after a timeout; later calls get its result (:mod:`nonholonomic.bounded`).
+
+def symbolic_flow_identity(form: HamiltonianForm, system: MechanicalSystem,
+                           limits: WorkLimits = work_limits.DEFAULT) -> tuple[bool | None, str]:
+    """Whether the τ-pushforward equals ``{H, ·}`` identically on the leaf.
+
+    Parameters
+    ----------
+    form, system : the Hamiltonian form and its system.
+    limits : the proof is tried when the map, its inverse, H, dτ/dt and the system's field have at most
+        ``limits.max_proof_ops`` sympy operations together; past it the verdict is None with that reason.
+
+    Returns
+    -------
+    (verdict, detail)
+        True (proved), False (disproved at a point, named), None (undecided: the detail says why, e.g.
+        ``"not tried: 25,310 operations > max 20,000 (max_proof_ops)"``). The proof runs to its end
+        and is cached (:mod:`nonholonomic.bounded`).
+
+    Raises
+    ------
+    nonholonomic.bounded.SafetyCapExceeded
+        If the proof outlives the service's safety cap (a failure, not a verdict).
     """
     if form.proof is not None:
         return form.proof
-    return bounded.prove(("flow", form, system), _prove_flow, (form, system), budget_s)
+    skipped = over(_flow_size(form, system), limits.max_proof_ops, "max_proof_ops", "the symbolic proof")
+    if skipped is not None:
+        return None, skipped
+    return bounded.prove(("flow", form, system), _prove_flow, (form, system))
 
 
 # --- evidence -------------------------------------------------------------------------------------
@@ -473,14 +500,14 @@ def _relative(a: np.ndarray, b: np.ndarray, scale: np.ndarray | None = None) -> 
 
 
 def hamiltonian_form_evidence(system: MechanicalSystem, parameters: np.ndarray, states: np.ndarray,
-                              budget_s: float = SYMBOLIC_BUDGET_S) -> list[CheckEvidence]:
+                              limits: WorkLimits = work_limits.DEFAULT) -> list[CheckEvidence]:
     """Evidence that ``system`` is Hamiltonian after the time substitution (empty for other kinds).
 
     Parameters
     ----------
     parameters : in ``system.parameter_symbols`` order.
     states : phase points on the constraint manifold (e.g. a trajectory's samples).
-    budget_s : seconds the symbolic proof may take (None verdict after that).
+    limits : the size limit of the symbolic proof (:func:`symbolic_flow_identity`; None verdict past it).
     """
     form = hamiltonian_form(system)
     if form is None:
@@ -491,7 +518,7 @@ def hamiltonian_form_evidence(system: MechanicalSystem, parameters: np.ndarray, 
     quantity = "d y/d tau - {H, y}"
     evidence: list[CheckEvidence] = []
 
-    proven, detail = symbolic_flow_identity(form, system, budget_s)
+    proven, detail = symbolic_flow_identity(form, system, limits)
     evidence.append(CheckEvidence(
         name="hamiltonian_flow", quantity=quantity, formula=form.formula, equation=form.equation, method="symbolic",
         residual=0.0 if proven else None, tolerance=0.0, passed=proven,

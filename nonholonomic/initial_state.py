@@ -7,7 +7,7 @@ Shared by :mod:`nonholonomic.simulation`, :mod:`nonholonomic.isomorphisms` and t
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,12 +114,19 @@ def constraint_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) 
     return problems
 
 
+#: A check of the field at a state ``(y, p)``: why it is not determined there, or None.
+FieldCheck = Callable[[np.ndarray, np.ndarray], "str | None"]
+
+
 def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, object],
-                           initial_state: Mapping[str, Sequence[float]], project: bool = False) -> list[FieldProblem]:
+                           initial_state: Mapping[str, Sequence[float]], project: bool = False,
+                           field_check: FieldCheck | None = None) -> list[FieldProblem]:
     """Everything wrong with ``initial_state`` for ``system``: unknown, missing or doubly given
     vectors, and violated constraints (e.g. |γ| ≠ 1 beyond 1e-9) — after projection if ``project``
     (a constraint without a projection, or a projection that cannot restore it, still counts).
-    Field paths start with ``initial_state``."""
+    Field paths start with ``initial_state``. The field is checked at the state by its compiled kernel
+    (:func:`potential_problems`), or by ``field_check`` when given (a user's Lagrangian system before its
+    equations are derived: numbers only, :func:`nonholonomic.lagrangian.checks.field_problem`)."""
     problems = _name_problems(system, initial_state)
     if problems:
         return problems
@@ -128,7 +135,14 @@ def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, ob
     if project:
         with np.errstate(all="ignore"):
             y, _ = project_initial_state(system, p, y)
-    return constraint_problems(system, p, y) + surface_problems(system, p, y) + potential_problems(system, p, y)
+    problems = constraint_problems(system, p, y) + surface_problems(system, p, y)
+    if field_check is None:
+        return problems + potential_problems(system, p, y)
+    why = field_check(y, p)
+    if why is None:
+        return problems
+    return problems + [FieldProblem("initial_state.q", f"{'; '.join(system.notes[:2])}: the field is not finite at "
+                                                       f"the initial state: {why}")]
 
 
 #: Kinds whose state moves on a surface Φ(x) = 0 of the user's, with normal ∇Φ/|∇Φ| and density |∇Φ|.

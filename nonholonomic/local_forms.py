@@ -4,7 +4,7 @@ Paper: section 1 (generalized Chaplygin systems, eq. 2704-7, 2704-8, Theorem 1),
 system" (eq. 2904-1, 2504-6 … 2504-9, Theorem 2) and section "Chaplygin's ball" (eq. 001 … 007 and
 the theorem after eq. 007). Everything here is built symbolically (sympy) with θ, φ and their
 velocities or momenta as symbols; nothing is simplified at build time (the expressions are cheap to
-form; proofs are the tests' business, bounded in time there). The numeric evidence
+form; proofs are the tests' and the report's business). The numeric evidence
 (:func:`local_form_evidence`) compares the local forms with the vector forms of the systems
 (:mod:`nonholonomic.systems.veselova`, :mod:`nonholonomic.systems.chaplygin_ball`) at phase points.
 

@@ -1,8 +1,8 @@
 """Monopoles (text after eq. 2704-9): the chart integral of the gyroscopic 2-form S̄ dq₁∧dq₂.
 
 A smooth closed 2-form on a compact surface is exact iff its integral vanishes; :func:`monopole_charge`
-integrates it over an angle chart (scipy's ``dblquad``, and sympy's exact integral under a time budget
-for small forms). Part of Theorem 1's result (:func:`nonholonomic.reducing_multiplier.hamiltonize`).
+integrates it over an angle chart (scipy's ``dblquad``, and sympy's exact integral for forms of at most
+:data:`SYMBOLIC_INTEGRAL_MAX_OPS` operations, run to its end). Part of Theorem 1's result (:func:`nonholonomic.reducing_multiplier.hamiltonize`).
 """
 
 from __future__ import annotations
@@ -13,8 +13,11 @@ from typing import Any
 import sympy as sp
 
 from nonholonomic import bounded
+from nonholonomic.work_limits import operations, over
 
-#: Largest 2-form (sympy operation count) for which monopole_charge tries sympy's exact integral.
+#: Largest 2-form (sympy operation count) for which monopole_charge tries sympy's exact integral: sympy's
+#: ``integrate`` does not return on larger ones such as the ball's S_bar (a deterministic gate, decided
+#: before the integral starts).
 SYMBOLIC_INTEGRAL_MAX_OPS = 40
 
 
@@ -27,7 +30,7 @@ def _symbolic_area_integral(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
 
 def monopole_charge(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
                     domain: tuple[tuple[float, float], tuple[float, float]],
-                    parameters: Mapping[sp.Symbol, float] | None = None, symbolic_budget_s: float = 3.0,
+                    parameters: Mapping[sp.Symbol, float] | None = None, symbolic: bool = True,
                     shift: tuple[sp.Expr, sp.Expr] | None = None) -> dict[str, Any]:
     """∫ S̄ dq₁∧dq₂ over the chart ``domain`` (text after eq. 2704-9).
 
@@ -48,7 +51,8 @@ def monopole_charge(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
     q : (q₁, q₂).
     domain : ((q₁ min, q₁ max), (q₂ min, q₂ max)); multiples of π are recognised for sympy.
     parameters : values of every other symbol.
-    symbolic_budget_s : seconds for sympy's attempt at the exact integral (≤ 0: no attempt).
+    symbolic : try sympy's exact integral too (run to its end; only for a form of at most
+        :data:`SYMBOLIC_INTEGRAL_MAX_OPS` operations, else the detail says it was not tried).
     shift : (W₁, W₂) with p̃ = p − W smooth fibre coordinates, or None.
 
     Returns
@@ -62,6 +66,8 @@ def monopole_charge(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
     ------
     ValueError
         If a symbol other than q has no value.
+    nonholonomic.bounded.SafetyCapExceeded
+        If sympy's integral outlives the service's safety cap (a failure, not a verdict).
     """
     from scipy.integrate import dblquad
 
@@ -102,17 +108,17 @@ def monopole_charge(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
         out["integral_S_bar"] = float(integrate(S_bar)[0])
         out["detail"] += (f"; the chart integral of S_bar alone is {out['integral_S_bar']:.12g} (the momenta p differ "
                           "from smooth fibre coordinates by W)")
-    if symbolic_budget_s <= 0:
+    if not symbolic:
         return out
-    if sp.count_ops(form) > SYMBOLIC_INTEGRAL_MAX_OPS:
-        # sympy's integrate does not return on large forms (the ball's S_bar), and a thread past its
-        # budget cannot be stopped: it would hold the interpreter for the rest of the process
-        out["detail"] += f"; sympy's exact integral not attempted (form has {sp.count_ops(form)} operations)"
+    skipped = over(operations(form), SYMBOLIC_INTEGRAL_MAX_OPS, "SYMBOLIC_INTEGRAL_MAX_OPS", "sympy's exact integral")
+    if skipped is not None:
+        # sympy's integrate does not return on large forms (the ball's S_bar): decided by size, not started
+        out["detail"] += f"; {skipped}"
         return out
     exact_domain = tuple(tuple(sp.nsimplify(x, [sp.pi]) for x in pair) for pair in domain)
     # identical calls share one computation, cached per process (nonholonomic.bounded)
     outcome = bounded.run(("monopole", "symbolic_area_integral", (form, q, exact_domain)), _symbolic_area_integral,
-                          (form, q, exact_domain), symbolic_budget_s)
+                          (form, q, exact_domain))
     if outcome.status == "done" and outcome.value is not None:
         out["symbolic"] = sp.sstr(outcome.value)
         out["detail"] += f"; sympy: {sp.sstr(outcome.value)}"

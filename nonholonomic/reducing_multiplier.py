@@ -39,9 +39,12 @@ singular at the poles; the smooth gyroscopic form is then that of p̃ = p − W 
 Chaplygin's ball in Euler angles, W = (0, cN cosθ) (from L = ρ_μM = cNγ + m(p_θ, p_φ − cN cosθ)),
 and the flux of the smooth form is −4πc/√det I (N = ρ_μ): non-zero for c ≠ 0, a monopole.
 
-Every symbolic step runs in a daemon thread under a time budget (the pattern of
-:mod:`nonholonomic.evidence.measure`); identities rational in sin qᵢ, cos qᵢ are decided exactly
-by the substitution t = tan(q/2) and an expanded numerator; numeric checks run at 40 digits.
+Every symbolic step runs to its end (:mod:`nonholonomic.bounded`: shared and cached per process); what
+keeps it small is decided before it starts by deterministic sizes (:mod:`nonholonomic.work_limits`,
+``limits``): a step past its limit is not tried and says so in the same words on every machine (a tidy
+step keeps its expression unshortened, a proof leaves its verdict undecided, sympy's ``integrate`` is
+not called). Identities rational in sin qᵢ, cos qᵢ are decided exactly by the substitution
+t = tan(q/2) and an expanded numerator; numeric checks run at 40 digits.
 
 This module is the front door: the density's three searches are in
 :mod:`nonholonomic.reducing_multiplier_density`, the monopole integral in :mod:`nonholonomic.monopole`,
@@ -50,7 +53,6 @@ the exact trigonometric decision in :mod:`nonholonomic.rational_trig`.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -61,7 +63,7 @@ import numpy as np
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
-from nonholonomic import bounded
+from nonholonomic import bounded, work_limits
 from nonholonomic.brackets import PoissonStructure, generalized_chaplygin_bracket
 from nonholonomic.monopole import SYMBOLIC_INTEGRAL_MAX_OPS, monopole_charge
 from nonholonomic.rational_trig import rational_trig_is_zero
@@ -73,6 +75,7 @@ from nonholonomic.reducing_multiplier_density import (
     _density_line_integral,
     _reduce_cos_squares,
 )
+from nonholonomic.work_limits import WorkLimits, operations, over
 
 __all__ = ["EQUATIONS", "ReducingMultiplierResult", "hamiltonize", "monopole_charge", "prove_theorem_1",
            "rational_trig_is_zero", "BASE_POINT", "SYMBOLIC_INTEGRAL_MAX_OPS"]
@@ -105,18 +108,22 @@ DIGITS = 40
 
 
 # --------------------------------------------------------------------------------------------------
-# symbolic work under a time budget
+# symbolic work, run to its end
 
 
-def _bounded(fn: Callable[..., Any], args: tuple[Any, ...], timeout: float) -> tuple[str, Any, float]:
-    """Run ``fn(*args)`` for at most ``timeout`` s: ``("done", value, s)``, ``("error", message, s)``
-    or ``("timeout" | "busy", message, s)``. Identical calls share one computation, cached per process
-    (:mod:`nonholonomic.bounded`)."""
-    outcome = bounded.run(("reducing_multiplier", fn.__qualname__, args), fn, args, timeout)
+def _run(fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[str, Any]:
+    """``fn(*args)`` run to its end: ``("done", value)`` or ``("error", sympy's message)``. Identical
+    calls share one computation, cached per process (:mod:`nonholonomic.bounded`).
+
+    Raises
+    ------
+    nonholonomic.bounded.SafetyCapExceeded
+        Past the service's safety cap (a failure of the caller, never a verdict).
+    """
+    outcome = bounded.run(("reducing_multiplier", fn.__qualname__, args), fn, args)
     if outcome.status == "done":
-        return "done", outcome.value, outcome.seconds
-    return ("error" if outcome.status == "error" else "timeout"), outcome.message, outcome.seconds
-
+        return "done", outcome.value
+    return "error", outcome.message
 
 
 def _symbols_of(expr: sp.Expr) -> sp.Expr:
@@ -204,6 +211,37 @@ def _without_step_derivatives(expr: sp.Expr) -> sp.Expr:
         return expr
     return expr.replace(lambda e: isinstance(e, sp.Derivative) and isinstance(e.expr, (sp.floor, sp.ceiling)),
                         lambda e: sp.S.Zero)
+
+
+#: Where a density found by integration is checked numerically before it is used (inside (0, π/2)²,
+#: away from the poles of angle charts; fixed points, not the sampler's draws).
+_DENSITY_POINTS = ((0.35, 0.55), (0.7, 1.2), (1.05, 0.3), (1.3, 0.9))
+
+
+def _unusable_density(rho: sp.Expr, log_rho: sp.Expr, A1: sp.Expr, A2: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
+                      sampler: _Sampler) -> str | None:
+    """Why a density from sympy's ``integrate`` cannot be used, or None: it must be a finite non-zero real
+    number at :data:`_DENSITY_POINTS` (sympy's antiderivatives may carry complex constants), and a closed
+    form must satisfy d ln rho = A2 dq1 - A1 dq2 there to 40 digits (a deterministic check, whether or not
+    the exact proof is within the limits)."""
+    exprs = [rho]
+    if not log_rho.has(sp.Integral):
+        exprs += [sp.diff(log_rho, q[0]) - A2, A2, sp.diff(log_rho, q[1]) + A1, A1]
+    try:
+        fn = sampler.function(exprs, q)
+    except ValueError as exc:
+        return str(exc)
+    for point in _DENSITY_POINTS:
+        values = fn(*point)
+        at = f"{q[0]}={point[0]}, {q[1]}={point[1]}"
+        if any(isinstance(v, mpmath.mpc) and v.imag != 0 for v in values):
+            return f"is not real at {at}"
+        values = [mpmath.re(v) for v in values]
+        if not all(mpmath.isfinite(v) for v in values) or values[0] == 0:
+            return f"is not a finite non-zero number at {at}"
+        if len(values) > 1 and max(_relative(values[1], values[1:3]), _relative(values[3], values[3:5])) > NUMERIC_ZERO:
+            return f"does not satisfy d ln rho = A2 dq1 - A1 dq2 at {at} (40 digits)"
+    return None
 
 
 def _relative(total: Any, terms: Sequence[Any]) -> float:
@@ -345,7 +383,7 @@ def _string(x: Any) -> Any:
 @dataclass
 class ReducingMultiplierResult:
     """Theorem 1 for one system: S in the momenta (eq. 2704-10), whether a density ρ(q) exists
-    (None: undecided in the budget), N = ρ, S̄ = N B (ERRATA 6), H̄(q, p), the bracket (2704-9), the
+    (None: undecided, with the reason), N = ρ, S̄ = N B (ERRATA 6), H̄(q, p), the bracket (2704-9), the
     verification of the flow, the monopole data, and the paper's equation for each item.
 
     ``momenta`` are the symbols p₁, p₂ of ``hamiltonian`` and ``bracket``; ``convention`` the one in
@@ -411,9 +449,12 @@ def _tidy(expr: sp.Expr, q: Sequence[sp.Symbol]) -> sp.Expr:
     return sp.factor(n) / sp.factor(d)
 
 
-def _tidy_bounded(expr: sp.Expr, q: Sequence[sp.Symbol], timeout: float) -> sp.Expr:
-    """:func:`_tidy` if it finishes within ``timeout`` s, else ``expr`` over a common denominator."""
-    status, value, _ = _bounded(_tidy, (expr, tuple(q)), timeout)
+def _tidy_within(expr: sp.Expr, q: Sequence[sp.Symbol], limits: WorkLimits) -> sp.Expr:
+    """:func:`_tidy` of ``expr`` if it has at most ``limits.max_tidy_ops`` operations (and sympy does not
+    raise), else ``expr`` over a common denominator: equal either way, only not shortened."""
+    if over(operations(expr), limits.max_tidy_ops, "max_tidy_ops") is not None:
+        return sp.together(expr)
+    status, value = _run(_tidy, (expr, tuple(q)))
     return value if status == "done" else sp.together(expr)
 
 
@@ -455,10 +496,11 @@ def _pointwise_flow(L: sp.Expr, q: tuple[sp.Symbol, sp.Symbol], v: tuple[sp.Symb
 
 def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], velocities: tuple[sp.Symbol, sp.Symbol],
                 a1: sp.Expr, a2: sp.Expr, b: sp.Expr, potential: sp.Expr | None = None,
-                parameters: Mapping[sp.Symbol, float] | None = None, budget_s: float = 20.0,
+                parameters: Mapping[sp.Symbol, float] | None = None,
                 domain: tuple[tuple[float, float], tuple[float, float]] | None = None,
                 shift: tuple[sp.Expr, sp.Expr] | None = None,
-                multiplier_symbol: sp.Symbol | None = None) -> ReducingMultiplierResult:
+                multiplier_symbol: sp.Symbol | None = None,
+                limits: WorkLimits = work_limits.DEFAULT) -> ReducingMultiplierResult:
     """Theorem 1 for the generalized Chaplygin system (2704-7) with Lagrangian ``L − U``.
 
     Parameters
@@ -470,34 +512,37 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
     potential : U(q), subtracted from L (None: already in L).
     parameters : values of constants for the numeric checks (the symbolic work keeps them as symbols);
         constants without a value get random values in (1.1, 2.9), reported in the details.
-    budget_s : seconds for the symbolic steps together (density proof, closedness proof, integration).
     domain : optional chart ((q₁ min, max), (q₂ min, max)); if given, ``monopole`` is
         :func:`monopole_charge` of S̄ over it.
     shift : optional (W₁, W₂) for :func:`monopole_charge`: p̃ = p − W are smooth fibre coordinates
-        (needs ``domain``). May contain ``multiplier_symbol``, which stands for the N found here
+        (needs ``domain``). May contain ``multiplier_symbol``, which stands for N found here
         (e.g. the ball: W = (0, c N cos θ)).
     multiplier_symbol : the symbol standing for N in ``shift``.
+    limits : the deterministic sizes of the symbolic steps (:class:`nonholonomic.work_limits.WorkLimits`):
+        the density ansatz, the closedness proof and the proof of a density found by integration are
+        tried on at most ``max_proof_ops`` operations, sympy's ``integrate`` on at most
+        ``max_integrate_ops`` (past it the line integral is left unevaluated), the normal forms of A₁,
+        A₂, B, G, w, V on at most ``max_tidy_ops``. Every step runs to its end; the same input gives
+        the same result on every machine.
 
     Returns
     -------
     ReducingMultiplierResult
         A₁, A₂, B (eq. 2704-10); ``measure_exists`` from the integrability condition
         ∂A₁/∂q₁ + ∂A₂/∂q₂ = 0 (proof of Theorem 1: False with the failing residual, None if
-        undecided); ρ with ∂ ln ρ/∂q₁ = A₂, ∂ ln ρ/∂q₂ = −A₁ (up to a constant factor); N = ρ;
-        S̄ = N B (ERRATA 6); H̄(q, p) = H(q, p/N); the bracket (2704-9); the verification that
-        the τ-flow is dx/dτ = {x, H̄} (Theorem 1's convention).
+        undecided, the reason naming the limit or sympy's error); ρ with ∂ ln ρ/∂q₁ = A₂,
+        ∂ ln ρ/∂q₂ = −A₁ (up to a constant factor); N = ρ; S̄ = N B (ERRATA 6); H̄(q, p) = H(q, p/N);
+        the bracket (2704-9); the verification that the τ-flow is dx/dτ = {x, H̄} (Theorem 1's
+        convention).
 
     Raises
     ------
     ValueError
         If L is not quadratic in the velocities, its kinetic matrix is singular, or a₁, a₂, b, U
         depend on the velocities.
+    nonholonomic.bounded.SafetyCapExceeded
+        If a symbolic step outlives the service's safety cap (a failure, not a verdict).
     """
-    start = time.perf_counter()
-
-    def remaining() -> float:
-        return max(budget_s - (time.perf_counter() - start), 0.0)
-
     q = (coordinates[0], coordinates[1])
     v = (velocities[0], velocities[1])
     a1, a2, b = (sp.expand_trig(sp.sympify(x)) for x in (a1, a2, b))
@@ -511,18 +556,17 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
     G, w, V = _quadratic_lagrangian(L, q, v, sampler)
 
     # Legendre transform (eq. 2704-10): q̇ = G⁻¹(P − w), S = (a, G⁻¹(P − w)) + b
-    tidy_s = max(min(remaining() / 8, 5.0), 0.2)
-    G = G.applyfunc(lambda e: _tidy_bounded(e, q, tidy_s))
-    w = w.applyfunc(lambda e: _tidy_bounded(e, q, tidy_s))
-    V = _tidy_bounded(V, q, tidy_s)
+    G = G.applyfunc(lambda e: _tidy_within(e, q, limits))
+    w = w.applyfunc(lambda e: _tidy_within(e, q, limits))
+    V = _tidy_within(V, q, limits)
     # L in the normal form ½ q̇ᵀGq̇ + (w, q̇) − V (equal to L; smaller to differentiate)
     L_normal = (sp.Matrix(v).T * G * sp.Matrix(v))[0, 0] / 2 + (w.T * sp.Matrix(v))[0, 0] - V
-    detG = _tidy_bounded(_det2(G), q, tidy_s)
+    detG = _tidy_within(_det2(G), q, limits)
     Ginv = _adj2(G) / detG
     avec = sp.Matrix([a1, a2])
     A = Ginv * avec
-    A1, A2 = _tidy_bounded(A[0], q, tidy_s), _tidy_bounded(A[1], q, tidy_s)
-    B = _tidy_bounded(b - (avec.T * Ginv * w)[0, 0], q, tidy_s)
+    A1, A2 = _tidy_within(A[0], q, limits), _tidy_within(A[1], q, limits)
+    B = _tidy_within(b - (avec.T * Ginv * w)[0, 0], q, limits)
     S = a1 * v[0] + a2 * v[1] + b
     p = _momentum_symbols(q, taken)
     P = (sp.Dummy("P1"), sp.Dummy("P2"))
@@ -544,7 +588,7 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
     base: dict[str, Any] = dict(A1=A1, A2=A2, B=B, momenta=p, convention="dx/dtau = {x, H_bar} (Theorem 1)")
 
     if worst > NUMERIC_ZERO:
-        shown = _tidy_bounded(condition, q, max(min(remaining(), 5.0), 0.2))
+        shown = _tidy_within(condition, q, limits)
         reason = (f"the integrability condition dA1/d{n1} + dA2/d{n2} = 0 fails: it equals {sp.sstr(shown)}; relative "
                   f"value |dA1/d{n1} + dA2/d{n2}| / (|dA1/d{n1}| + |dA2/d{n2}|) = {worst:.3g} at "
                   f"{n1}={worst_at[0]:.4f}, "
@@ -559,19 +603,30 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
 
     # the density: an exact ansatz first (its proof also proves closedness), then sympy integration
     rho, how, exact_density = None, "", False
-    status, found, secs = _bounded(_density_ansatz, (A1, A2, (detG,), q, tuple(sampler.values.items())), remaining())
-    if status == "done" and found is not None:
-        (rho, how), exact_density = found, True
-        how += f" ({secs:.2f} s)"
+    tried: list[str] = []  # why each search found nothing (the reason when no density is found)
+    skipped = over(operations(A1, A2, detG), limits.max_proof_ops, "max_proof_ops", "the ansatz")
+    if skipped is None:
+        status, found = _run(_density_ansatz, (A1, A2, (detG,), q, tuple(sampler.values.items())))
+        if status == "done" and found is not None:
+            (rho, how), exact_density = found, True
+        tried.append("the ansatz " + ("found none" if status == "done" else f"failed ({found})"))
+    else:
+        tried.append(skipped)
     closed_proven = exact_density
     if exact_density:
         closed_detail = "implied by the exact density (d ln rho = A2 dq1 - A1 dq2 proved)"
     else:
-        status, closed, secs = _bounded(rational_trig_is_zero, (sp.together(condition), q), remaining())
-        closed_proven = status == "done" and closed is True
-        closed_detail = (f"proved identically zero ({secs:.2f} s)" if closed_proven else
-                         f"zero at 8 random points to {worst:.1e} (40 digits); symbolic proof: "
-                         + {"timeout": "budget exhausted", "error": f"{closed}"}.get(status, "undecided"))
+        numeric = f"zero at 8 random points to {worst:.1e} (40 digits); "
+        skipped = over(operations(condition), limits.max_proof_ops, "max_proof_ops", "symbolic proof")
+        if skipped is not None:
+            status, closed = "skipped", None
+            closed_detail = numeric + skipped
+        else:
+            status, closed = _run(rational_trig_is_zero, (sp.together(condition), q))
+            closed_proven = status == "done" and closed is True
+            closed_detail = ("proved identically zero" if closed_proven else numeric + "symbolic proof: " + (
+                f"sympy could not decide: {closed}" if status == "error" else
+                "undecided (not rational in q, sin q, cos q and the parameters)"))
         if status == "done" and closed is False:  # numerically tiny but not identically zero
             return ReducingMultiplierResult(
                 measure_exists=False, integrability_condition=f"{condition_text}; not identically zero",
@@ -580,26 +635,41 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
                 density=None, reducing_multiplier=None, S_bar=None, hamiltonian=None, bracket=None,
                 verification={"method": "symbolic", "residual": worst, "passed": None, "detail": "no multiplier"},
                 monopole=None, equations=dict(EQUATIONS), **base)
-        for attempt in (_density_by_integration, _density_line_integral):
-            if remaining() <= 0:
-                bounded.cut_short()
-                break
-            status, found, secs = _bounded(attempt, (A1, A2, q), remaining())
+        searches = ((_density_by_integration, "sympy integrate",
+                     over(operations(A1, A2), limits.max_integrate_ops, "max_integrate_ops", "sympy integrate"), ()),
+                    (_density_line_integral, "the line integral", None, (limits.max_integrate_ops,)))
+        for attempt, name, skipped, extra in searches:
+            if skipped is not None:
+                tried.append(skipped)
+                continue
+            status, found = _run(attempt, (A1, A2, q, *extra))
             if status != "done" or found is None:
+                tried.append(f"{name} " + ("found none" if status == "done" else f"failed ({found})"))
                 continue
-            status, holds, _ = _bounded(_density_equations_hold, (found[2], A1, A2, q), remaining())
-            if status == "done" and holds is False:  # sympy's antiderivative is wrong: do not use it
+            unusable = _unusable_density(found[0], found[2], A1, A2, q, sampler)
+            if unusable is not None:
+                tried.append(f"{name}: its density {unusable}")
                 continue
-            rho, how = found[0], found[1] + f" ({secs:.2f} s)"
-            exact_density = status == "done" and holds is True
-            how += "; d ln rho = A2 dq1 - A1 dq2 " + ("proved exactly" if exact_density else "not proved symbolically")
+            unproved = over(operations(found[2], A1, A2), limits.max_proof_ops, "max_proof_ops", "its proof")
+            holds: bool | None = None
+            if unproved is None:
+                status, holds = _run(_density_equations_hold, (found[2], A1, A2, q))
+                if status == "done" and holds is False:  # sympy's antiderivative is wrong: do not use it
+                    tried.append(f"{name} gave a wrong antiderivative")
+                    continue
+                if status != "done":
+                    unproved, holds = f"its proof failed (sympy: {holds})", None
+            rho, how = found[0], found[1]
+            exact_density = holds is True
+            how += "; d ln rho = A2 dq1 - A1 dq2 " + (
+                "proved exactly" if exact_density else "not proved symbolically" + (f": {unproved}" if unproved else ""))
             break
     integrability = f"{condition_text}; simplified value: 0 ({closed_detail})"
     equations = {**EQUATIONS, "density_method": how}
     measure_exists: bool | None = True if closed_proven else None
-    reason = "" if closed_proven else "undecided within the budget: " + closed_detail
+    reason = "" if closed_proven else "undecided: " + closed_detail
     if rho is None:
-        reason += "; no density found within the budget (ansatz, sympy integrate, line integral)"
+        reason += "; no density found (" + "; ".join(tried) + ")"
         return ReducingMultiplierResult(
             measure_exists=measure_exists, integrability_condition=integrability, reason=reason.lstrip("; "),
             density=None, reducing_multiplier=None, S_bar=None, hamiltonian=None, bracket=None,
@@ -632,10 +702,7 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
     if domain is not None:
         W = None if shift is None else tuple(
             sp.sympify(w).xreplace({multiplier_symbol: N} if multiplier_symbol is not None else {}) for w in shift)
-        if remaining() <= 0:
-            bounded.cut_short()  # sympy's exact integral not tried for lack of budget
-        monopole = monopole_charge(S_bar, q, domain, sampler.values, shift=W,  # type: ignore[arg-type]
-                                   symbolic_budget_s=min(3.0, remaining()))
+        monopole = monopole_charge(S_bar, q, domain, sampler.values, shift=W)  # type: ignore[arg-type]
         monopole["detail"] += sampler.note()
     elif B == 0:
         monopole = {"integral": 0.0, "exact": True, "detail": "S_bar = 0: no gyroscopic 2-form"}

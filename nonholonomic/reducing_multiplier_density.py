@@ -1,6 +1,7 @@
 """Theorem 1's density ρ(q): ∂ ln ρ/∂q₁ = A₂, ∂ ln ρ/∂q₂ = −A₁ (proof of Theorem 1), found three ways.
 
-In turn (each run under a time budget by :func:`nonholonomic.reducing_multiplier.hamiltonize`): an
+In turn (each run to its end by :func:`nonholonomic.reducing_multiplier.hamiltonize`, which first
+checks its size against the deterministic limits of :mod:`nonholonomic.work_limits`): an
 ansatz ρ = Π fⱼ^kⱼ exp(α·q) over the irreducible factors of A₁, A₂ and det G, exponents fitted at random
 points, rationalized and proved exactly (:func:`_density_ansatz`); sympy's ``integrate``
 (:func:`_density_by_integration`); the line integral from :data:`BASE_POINT`
@@ -16,6 +17,7 @@ import numpy as np
 import sympy as sp
 
 from nonholonomic.rational_trig import rational_trig_is_zero
+from nonholonomic.work_limits import MAX_INTEGRATE_OPS, operations, over
 
 #: Base point of the line integral for ln ρ (inside (0, π/2)², where angle charts are regular).
 BASE_POINT = (sp.Rational(7, 10), sp.Rational(2, 5))
@@ -132,14 +134,23 @@ def _density_by_integration(A1: sp.Expr, A2: sp.Expr,
             F + G)
 
 
-def _density_line_integral(A1: sp.Expr, A2: sp.Expr, q: tuple[sp.Symbol, sp.Symbol]) -> tuple[sp.Expr, str, sp.Expr]:
+def _density_line_integral(A1: sp.Expr, A2: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
+                           max_integrate_ops: int = MAX_INTEGRATE_OPS) -> tuple[sp.Expr, str, sp.Expr]:
     """ln ρ(q) = ∫₀¹ [A₂ (q₁ − q₁⁰) − A₁ (q₂ − q₂⁰)](q⁰ + s(q − q⁰)) ds, the straight segment from
-    the base point q⁰ (valid on a star-shaped domain around it), in closed form if sympy finds one."""
+    the base point q⁰ (valid on a star-shaped domain around it), in closed form if sympy finds one.
+
+    sympy's ``integrate`` is only given an integrand of at most ``max_integrate_ops`` operations
+    (:data:`nonholonomic.work_limits.MAX_INTEGRATE_OPS`); a larger one is left as an unevaluated integral
+    (the same function, evaluated numerically where it is used)."""
     s = sp.Dummy("s")
     on_segment = {qi: q0 + s * (qi - q0) for qi, q0 in zip(q, BASE_POINT)}
     integrand = A2.xreplace(on_segment) * (q[0] - BASE_POINT[0]) - A1.xreplace(on_segment) * (q[1] - BASE_POINT[1])
-    integral = sp.integrate(integrand, (s, 0, 1))
-    how = "left as an integral (no closed form found)" if integral.has(sp.Integral) else "evaluated by sympy"
+    skipped = over(operations(integrand), max_integrate_ops, "max_integrate_ops", "sympy's integrate")
+    if skipped is not None:
+        integral, how = sp.Integral(integrand, (s, 0, 1)), f"left as an integral ({skipped})"
+    else:
+        integral = sp.integrate(integrand, (s, 0, 1))
+        how = "left as an integral (no closed form found)" if integral.has(sp.Integral) else "evaluated by sympy"
     return sp.exp(integral), (f"ln rho = line integral of A2 dq1 - A1 dq2 along the segment from q0 = "
                               f"({BASE_POINT[0]}, {BASE_POINT[1]}), {how}"), integral
 

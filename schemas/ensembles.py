@@ -19,7 +19,7 @@ from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges
 from nonholonomic.analysis.grid import plan as plan_grid
 from nonholonomic.analysis.indicators import thresholds_for
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.initial_state import FieldProblem, initial_state_problems, project_initial_state
+from nonholonomic.initial_state import FieldProblem, project_initial_state
 from nonholonomic.kernels import parameter_vector, state_vector
 from nonholonomic.refusals import RefusedField
 from schemas.analysis import LyapunovRequest, PoincareRequest
@@ -193,7 +193,7 @@ class EnsembleRequest(BaseModel):
         ``max_ensemble_chunks`` chunks (each is a message the POST sends)."""
         if self.chunk_size:
             return self.chunk_size
-        size = default_chunk_size(system or self.system.validation_definition(), self.t_final,  # type: ignore[attr-defined]
+        size = default_chunk_size(system or self.system.outline(), self.t_final,  # type: ignore[attr-defined]
                                   poincare=self.poincare.options() if self.poincare else None,
                                   lyapunov=self.lyapunov.options() if self.lyapunov else None,
                                   indicators=bool(self.indicators))
@@ -264,7 +264,7 @@ class EnsembleRequest(BaseModel):
         found: list[FieldProblem] = []
         if spec.initial_states is not None:
             for i, state in enumerate(spec.initial_states):
-                for p in initial_state_problems(system, parameters, state, project):
+                for p in self.system.state_problems(system, parameters, state, project):  # type: ignore[attr-defined]
                     found.append(FieldProblem(p.field.replace("initial_state", f"members.initial_states[{i}]", 1),
                                               p.reason))
                 if len(found) >= 20:
@@ -281,7 +281,8 @@ class EnsembleRequest(BaseModel):
                 except ValueError as exc:
                     found.append(FieldProblem(f"members.sweep.values[{i}]", str(exc)))
                     continue
-                for p in initial_state_problems(system, values, spec.sweep.initial_state, project):
+                for p in self.system.state_problems(system, values, spec.sweep.initial_state,  # type: ignore[attr-defined]
+                                                    project):
                     found.append(FieldProblem(p.field.replace("initial_state", "members.sweep.initial_state", 1),
                                               f"{p.reason} (with {spec.sweep.parameter} = {value:g})"))
                 if len(found) >= 20:

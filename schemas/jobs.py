@@ -10,7 +10,7 @@ from nonholonomic.evidence.claims import MAX_CLAIMS, parse_claim
 from nonholonomic.expressions import ExpressionError
 from nonholonomic.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH
-from nonholonomic.initial_state import FieldProblem, initial_state_problems
+from nonholonomic.initial_state import FieldProblem
 from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
 from nonholonomic.definition import MechanicalSystem
 from schemas.analysis import LyapunovRequest, PoincareRequest
@@ -98,7 +98,7 @@ class JobRequest(BaseModel):
     claims: list[ClaimRequest] = Field(
         default_factory=list, max_length=MAX_CLAIMS,
         description="candidate integrals or Casimirs of one's own, each checked along the trajectory (drift) and "
-                    "symbolically (dI/dt = sum dI/dx_i f_i identically zero, within a budget)")
+                    "symbolically (dI/dt = sum dI/dx_i f_i identically zero, within the work limits)")
 
     _t_final_limit = field_validator("t_final")(t_final_within_limit)
 
@@ -122,15 +122,15 @@ class JobRequest(BaseModel):
     def problems(self, step: Step = no_step) -> list[FieldProblem]:
         """Violations only the physics can see: the expressions read by sympy, state names, |γ| = 1, the
         engine's tolerance range. ``step(fields)`` is told which fields each stage reads (a validation
-        budget names them when it runs out)."""
+        safety cap names them if it stops the check)."""
         system, found = self.system.checked_definition(step)  # type: ignore[attr-defined]
         if system is None:
             return found
         found = [FieldProblem(f"checks[{i}]", f"{check!r} is not available for {system.kind}; "
                                               f"available: {', '.join(available_checks(system))}")
                  for i, check in enumerate(self.checks) if check not in available_checks(system)]
-        found += initial_state_problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
-                                        self.initial_state, self.project_initial_state)
+        found += self.system.state_problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
+                                            self.initial_state, self.project_initial_state)
         found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov, step)
         if self.periodic_orbit is not None:
             step(["periodic_orbit.surface"])

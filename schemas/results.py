@@ -99,7 +99,7 @@ class ProjectionItem(BaseModel):
 class ClaimSymbolic(BaseModel):
     identically_conserved: bool | None = Field(
         description="dI/dt = sum dI/dx_i f_i is identically 0 (True), is not (False: it may still vanish on the "
-                    "constraints' level set), or undecided within the budget (None)")
+                    "constraints' level set), or undecided (None: a work limit, named in the detail)")
     detail: str
 
 
@@ -153,6 +153,22 @@ def system_units(system: MechanicalSystem) -> dict[str, str]:
     units.update({d.name: d.unit for d in system.derived})
     units.update({p.name: p.unit for p in system.parameters})
     return units
+
+
+#: The fields of an answer that say how long, or when, something was computed, or whether it was read back:
+#: the only ones in which two runs of the same request may differ (quiet or loaded, cold or warm caches,
+#: embedded or queue mode). Each is removed wherever it appears by :func:`without_timing`.
+TIMING_FIELDS = ("wall_time_s", "seconds", "computed")
+
+
+def without_timing(answer: Any) -> Any:
+    """``answer`` (JSON) without its :data:`TIMING_FIELDS`, at any depth: what must be identical between two
+    runs of the same request."""
+    if isinstance(answer, dict):
+        return {k: without_timing(v) for k, v in answer.items() if k not in TIMING_FIELDS}
+    if isinstance(answer, list):
+        return [without_timing(v) for v in answer]
+    return answer
 
 
 def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict[str, Any]:

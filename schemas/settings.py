@@ -71,8 +71,16 @@ class Settings(BaseSettings):
                                        "unless the API serving it renews it (an API that died frees it then)")
     auth_failures_per_minute: int = Field(20, ge=0, description="requests with an unknown API key one client "
                                           "address may send a minute; beyond: 429 (0: no limit)")
-    validation_budget_s: float = Field(5.0, gt=0, description="seconds a request's expressions may take to be read "
-                                       "and checked (in a child process of the symbolic pool); beyond: 422")
+    validation_safety_cap_s: float = Field(
+        120.0, gt=0, validation_alias=AliasChoices("NONHOLONOMIC_VALIDATION_SAFETY_CAP_S",
+                                                   "NONHOLONOMIC_VALIDATION_BUDGET_S"),
+        description="safety cap (seconds) on checking a request's expressions in a child process of the symbolic "
+                    "pool: beyond it the child is killed and the answer is a 503 with Retry-After, never a 422 "
+                    "(refusals are decided by deterministic size measures, not by time). "
+                    "NONHOLONOMIC_VALIDATION_BUDGET_S, its old name, is still read (deprecated)")
+    symbolic_safety_cap_s: float = Field(
+        900.0, gt=0, description="safety cap (seconds) on one symbolic step of a job (a derivation, a search, a "
+                                 "proof): beyond it the job fails saying so (never a different verdict)")
     request_threads: int = Field(8, ge=1, description="threads running the API's blocking request work at once, "
                                  "besides the symbolic pool's; more requests wait on the event loop (few threads keep "
                                  "the event loop, and /health, answering under load)")

@@ -2,6 +2,10 @@
 
 Every expression is a string parsed by :mod:`nonholonomic.expressions` (a whitelist over Python's
 AST; never eval): declared names, numbers, + − * / ** and named functions (sin, cos, sqrt ...).
+
+The answer to a body is the same on every machine and at any load: the symbolic work is bounded by
+deterministic work limits (``limits``: sympy operation counts, :mod:`nonholonomic.work_limits`), never by
+seconds. ``budget_s`` is deprecated and ignored (the answer's ``deprecations`` says so).
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, Strict, model_validator
 
+from nonholonomic import work_limits
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE
 
 #: A named constant's value (as a system parameter's: beyond, the pointwise checks overflow).
@@ -19,8 +24,52 @@ Constant = Annotated[float, Strict(), Field(allow_inf_nan=False, ge=-MAX_PARAMET
 Expression = Annotated[str, Field(min_length=1, max_length=2000, description="expression, e.g. 'x*y - z'")]
 Name = Annotated[str, Field(min_length=1, max_length=32)]
 Bounds = Annotated[list[Expression], Field(min_length=2, max_length=2, description="[min, max]")]
-#: Upper bound on the seconds a request may grant to symbolic work.
+#: Upper bound of the deprecated ``budget_s`` (still validated, no longer used).
 MAX_BUDGET_S = 30.0
+#: How far a request may raise a work limit above its default.
+MAX_LIMIT_FACTOR = 10
+#: The note an answer carries when its request sent ``budget_s``.
+BUDGET_S_DEPRECATED = ("budget_s is deprecated and ignored: verdicts are bounded by work limits (limits.max_proof_ops, "
+                       "limits.max_integrate_ops, limits.max_tidy_ops: sympy operation counts), not seconds, so the "
+                       "same body gets the same answer on every machine; it will be removed")
+
+_BUDGET_S_DESCRIPTION = ("deprecated and ignored (validated as before: > 0, <= 30): the symbolic work is bounded by "
+                         "`limits`, not by seconds; the answer's `deprecations` says so. It will be removed")
+_DEPRECATIONS_DESCRIPTION = ("notes on deprecated request fields this request used (e.g. budget_s), each saying "
+                             "what replaces it; empty when it used none")
+
+
+class SymbolicLimits(BaseModel):
+    """Deterministic limits of a request's symbolic work, in sympy operations (``count_ops``).
+
+    A step past its limit is not tried: its verdict is undecided (a pointwise check decides where one
+    exists) with a reason naming the limit, e.g. "not tried: 25,310 operations > max 20,000
+    (max_proof_ops)". Raising a limit decides more, at a cost in CPU time that grows faster than the
+    limit; the answer stays the same on every machine."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    max_proof_ops: int = Field(
+        work_limits.MAX_PROOF_OPS, ge=0, le=MAX_LIMIT_FACTOR * work_limits.MAX_PROOF_OPS,
+        description="largest expression a symbolic identity proof is tried on (a Jacobiator, {C, x_i}, P_ij + P_ji, "
+                    "the closedness condition and density equations of Theorem 1). Cost: expanding a numerator grows "
+                    "faster than linearly in its size; at the default the known proofs take seconds, at 10x a proof "
+                    "may take minutes and meet the service's safety cap (a 503)")
+    max_integrate_ops: int = Field(
+        work_limits.MAX_INTEGRATE_OPS, ge=0, le=MAX_LIMIT_FACTOR * work_limits.MAX_INTEGRATE_OPS,
+        description="largest integrand given to sympy's integrate (Theorem 1's density by integration; past it the "
+                    "line integral is left unevaluated). Cost: sympy's Risch and heuristic integrators have no bound "
+                    "of their own; above the default an integral may run for minutes and meet the safety cap (a 503)")
+    max_tidy_ops: int = Field(
+        work_limits.MAX_TIDY_OPS, ge=0, le=MAX_LIMIT_FACTOR * work_limits.MAX_TIDY_OPS,
+        description="largest expression cancelled and factored into a normal form (Theorem 1's G, w, V, A1, A2, B); "
+                    "larger ones are kept equal but unshortened. Cost: factoring grows fast with the size; a "
+                    "normal form makes the later steps cheaper, so raising it may also save time")
+
+    def to_core(self) -> work_limits.WorkLimits:
+        """These limits for the core."""
+        return work_limits.WorkLimits(max_proof_ops=self.max_proof_ops, max_integrate_ops=self.max_integrate_ops,
+                                      max_tidy_ops=self.max_tidy_ops)
 
 
 class BracketVerifyRequest(BaseModel):
@@ -36,7 +85,9 @@ class BracketVerifyRequest(BaseModel):
     parameters: dict[Name, Constant] = Field(
         default_factory=dict, description="named constants: symbolic in the proofs, these values in pointwise checks")
     symbols: list[Name] = Field(default_factory=list, description="further names kept symbolic (no value)")
-    budget_s: float = Field(10.0, gt=0, le=MAX_BUDGET_S, description="seconds allowed for each symbolic proof")
+    limits: SymbolicLimits | None = Field(
+        None, description="work limits of the symbolic checks (null: the defaults); only max_proof_ops applies here")
+    budget_s: float | None = Field(None, gt=0, le=MAX_BUDGET_S, deprecated=True, description=_BUDGET_S_DESCRIPTION)
 
     @model_validator(mode="after")
     def _square(self) -> BracketVerifyRequest:
@@ -77,7 +128,8 @@ class HamiltonizeRequest(BaseModel):
     potential: Expression | None = Field(None, description="U(q), if not already in the Lagrangian")
     parameters: dict[Name, Constant] = Field(default_factory=dict, description="values of the named constants")
     symbols: list[Name] = Field(default_factory=list, description="names kept symbolic (e.g. I1, I2, I3)")
-    budget_s: float = Field(20.0, gt=0, le=MAX_BUDGET_S)
+    limits: SymbolicLimits | None = Field(None, description="work limits of the symbolic steps (null: the defaults)")
+    budget_s: float | None = Field(None, gt=0, le=MAX_BUDGET_S, deprecated=True, description=_BUDGET_S_DESCRIPTION)
     monopole: MonopoleRequest | None = Field(
         None, description="integrate S_bar dq1^dq2 over a chart: exact (integral 0) or a monopole")
 
@@ -137,6 +189,7 @@ class BracketVerifyResult(_Answer):
     jacobi: BracketCheck
     casimirs: list[CasimirCheck]
     rank: BracketRank
+    deprecations: list[str] = Field(default_factory=list, description=_DEPRECATIONS_DESCRIPTION)
 
 
 class HamiltonizeBracket(_Answer):
@@ -180,7 +233,7 @@ class HamiltonizeResult(_Answer):
     A1: str = Field(description="S = A1 P1 + A2 P2 + B (eq. 2704-10)")
     A2: str
     B: str
-    measure_exists: bool | None = Field(description="null: undecided within the budget")
+    measure_exists: bool | None = Field(description="null: undecided (`reason` says why, e.g. a work limit)")
     integrability_condition: str
     reason: str
     density: str | None
@@ -193,6 +246,7 @@ class HamiltonizeResult(_Answer):
     monopole: MonopoleResult | None
     equations: dict[str, str]
     convention: str
+    deprecations: list[str] = Field(default_factory=list, description=_DEPRECATIONS_DESCRIPTION)
 
 
 class HamiltonizeExample(_Answer):

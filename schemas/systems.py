@@ -16,9 +16,9 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, Valid
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
 from nonholonomic.expressions import ExpressionError, check_expression, declare_symbols
-from nonholonomic.initial_state import FieldProblem
-from nonholonomic.lagrangian import DerivationError as LagrangianDerivationError
+from nonholonomic.initial_state import FieldProblem, initial_state_problems
 from nonholonomic.lagrangian import parse as lagrangian
+from nonholonomic.lagrangian.checks import field_problem
 from nonholonomic.lagrangian.parse import MAX_COORDINATES
 from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, Potential
 from nonholonomic.systems import POTENTIAL_NAMES, SURFACE_KINDS, SYSTEMS, get_system, own_names, user_potential
@@ -28,12 +28,12 @@ from nonholonomic.systems.ball_on_surface import SURFACE_VARIABLES, Surface, sur
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE as GENERALIZED_CHAPLYGIN_EXAMPLE
 
 FiniteFloat = Annotated[float, Strict(), Field(allow_inf_nan=False)]
-#: ``step(fields)``: the validation is about to read these fields (a budget overrun names them).
+#: ``step(fields)``: the validation is about to read these fields (the safety cap names them if it stops the check).
 Step = Callable[[Sequence[str]], None]
 
 
 def no_step(fields: Sequence[str]) -> None:
-    """The :data:`Step` of a validation that runs without a budget."""
+    """The :data:`Step` of a validation that reports nothing (in the API process)."""
 
 
 #: Admissible state components (initial states, vectors): beyond, the equations' products overflow.
@@ -135,7 +135,7 @@ def _expression_model(kind: str) -> type[PotentialSpec]:
         return values
 
     def parsed(cls: type, text: str, info: ValidationInfo) -> str:
-        """The cheap checks only (syntax, whitelist, names); sympy reads U within the validation budget."""
+        """The cheap checks only (syntax, whitelist, names); sympy reads U off the event loop (service/validation.py)."""
         if "parameters" not in info.data:
             return text  # the parameters are refused already
         try:
@@ -203,7 +203,7 @@ class SurfaceSpec(BaseModel):
     @field_validator("Phi")
     @classmethod
     def _parsed(cls, text: str, info: ValidationInfo) -> str:
-        """The cheap checks only (syntax, whitelist, names); sympy reads Phi within the validation budget."""
+        """The cheap checks only (syntax, whitelist, names); sympy reads Phi off the event loop (service/validation.py)."""
         if "parameters" not in info.data:
             return text  # the parameters are refused already
         try:
@@ -238,9 +238,20 @@ class SystemSpec(BaseModel):
                           None if on is None else on.core())
 
     def validation_definition(self) -> MechanicalSystem:
-        """The definition a request is checked against (the same as :meth:`definition` but for kinds whose
-        definition runs heavy symbolic work)."""
+        """The definition without its structure searches (the same as :meth:`definition` but for kinds whose
+        definition runs heavy symbolic work): units, labels and plots of a stored job."""
         return self.definition()
+
+    def outline(self) -> MechanicalSystem:
+        """What a request is checked against on the request path (:meth:`validation_definition`, but for
+        kinds whose equations are derived with the job)."""
+        return self.validation_definition()
+
+    def state_problems(self, system: MechanicalSystem, parameters: Mapping[str, Any],
+                       initial_state: Mapping[str, Sequence[float]], project: bool = False) -> list[FieldProblem]:
+        """Everything wrong with ``initial_state`` (:func:`nonholonomic.initial_state.initial_state_problems`)
+        at the parameters' ``parameters``."""
+        return initial_state_problems(system, parameters, initial_state, project)
 
     def expressions(self) -> list[tuple[str, str]]:
         """The expressions the user wrote in this block, by field path (``system.potential.U`` ...)."""
@@ -274,7 +285,7 @@ class SystemSpec(BaseModel):
                 except ExpressionError as exc:
                     return None, [FieldProblem(field, str(exc))]
         step(fields or ["system"])
-        return self.validation_definition(), []
+        return self.outline(), []
 
 
 def _names_apart(cls: type, potential: PotentialSpec, info: ValidationInfo) -> PotentialSpec:
@@ -386,7 +397,7 @@ class GeneralizedChaplyginSpec(SystemSpec):
     @field_validator("lagrangian", "a1", "a2", "b", "potential")
     @classmethod
     def _parsed(cls, text: str | None, info: ValidationInfo) -> str | None:
-        """The cheap checks only (syntax, whitelist, names); sympy reads the field within the validation budget."""
+        """The cheap checks only (syntax, whitelist, names); sympy reads the field off the event loop (service/validation.py)."""
         if text is None or any(k not in info.data for k in ("coordinates", "velocities", "parameters")):
             return text  # the names are refused already
         try:
@@ -471,7 +482,7 @@ class LagrangianSpec(SystemSpec):
     @field_validator("L", "constraints")
     @classmethod
     def _parsed(cls, value: Any, info: ValidationInfo) -> Any:
-        """The cheap checks only (syntax, whitelist, names); sympy reads the fields within the validation budget."""
+        """The cheap checks only (syntax, whitelist, names); sympy reads the fields off the event loop (service/validation.py)."""
         if any(k not in info.data for k in ("coordinates", "parameters")):
             return value  # the names are refused already
         names = ["t", *info.data["coordinates"], *(lagrangian.velocity_name(c) for c in info.data["coordinates"]),
@@ -496,8 +507,25 @@ class LagrangianSpec(SystemSpec):
         return lag.define(self.data())
 
     def validation_definition(self) -> MechanicalSystem:
-        """The equations without the structure search (enough to check a request: names, state, the field)."""
+        """The derived equations without the structure searches (units, labels and plots of a stored job)."""
         return lag.define(self.data(), reduce=False)
+
+    def outline(self) -> MechanicalSystem:
+        """Names, integrals, constraints and the plain elimination's field, in milliseconds
+        (:func:`nonholonomic.systems.lagrangian.outline`): the derivation runs with the job."""
+        return lag.outline(self.data())
+
+    def state_problems(self, system: MechanicalSystem, parameters: Mapping[str, Any],
+                       initial_state: Mapping[str, Sequence[float]], project: bool = False) -> list[FieldProblem]:
+        """As the base class, the field at the state checked by numbers alone (M, A, h there: never a
+        compiled kernel of the outline's field)."""
+        data = self.data()
+
+        def field_check(y: Any, p: Any) -> str | None:
+            n = len(data.q)
+            return field_problem(data, y[:n], y[n:], dict(zip(data.parameters, map(float, p))))
+
+        return initial_state_problems(system, parameters, initial_state, project, field_check)
 
     def generic_definition(self) -> MechanicalSystem:
         """The definition an ensemble sweeping a parameter shares: only what holds for every value claimed."""
@@ -511,13 +539,9 @@ class LagrangianSpec(SystemSpec):
         step(fields)
         try:
             self.data()
-            step(fields)  # the derivation reads them all
-            return self.validation_definition(), []
+            return self.outline(), []
         except lagrangian.DataError as exc:
             return None, [FieldProblem(f"system.{exc.field}", exc.reason)]
-        except LagrangianDerivationError as exc:
-            return None, [FieldProblem("system.L", f"{exc}; write L or the constraints simpler, or with fewer "
-                                                   "coordinates")]
 
 
 #: What POST /v1/jobs takes as ``system``: every kind of the catalog, a generalized Chaplygin system and a

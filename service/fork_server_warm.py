@@ -4,7 +4,7 @@ work every validation child would otherwise repeat is done once here, before any
 A child checking a request with user expressions (:mod:`service.validation`) needs each kind's own names
 (:func:`nonholonomic.systems.own_names`, one definition per kind) and, for the balls on a surface, the
 reduction check of :mod:`nonholonomic.systems.ball_on_quadric`: about 4 s of sympy, which would count
-against every request's validation budget. The fork server pays it once, at the API's start-up.
+on every request's validation. The fork server pays it once, at the API's start-up.
 """
 
 from __future__ import annotations

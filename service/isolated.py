@@ -1,11 +1,13 @@
 """Run a user's symbolic request in a child process, so that nothing it starts outlives it.
 
-The core bounds each sympy step by a budget (:mod:`nonholonomic.bounded`), but a thread past its
-budget cannot be stopped: in the API process it would keep the interpreter busy until a restart,
-slowing every later request (measured: a runaway ``integrate`` slowed a whole process 5-fold).
+The core runs each sympy step to its end, its size bounded beforehand by deterministic work limits
+(:mod:`nonholonomic.work_limits`); the clock is only a safety cap (:mod:`nonholonomic.bounded`), and a
+thread past it cannot be stopped: in the API process it would keep the interpreter busy until a
+restart, slowing every later request (measured: a runaway ``integrate`` slowed a whole process 5-fold).
 Here the request runs in a process forked from a clean fork server (its modules preloaded, no
 threads); the process ends when the answer is sent, and its leftover threads end with it. If it
-has not answered within the hard limit it is killed.
+has not answered within the hard limit (the caller's safety cap plus :data:`GRACE_S`) it is killed:
+a failure of the machine, which the caller reports as such (never as a verdict).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 log = logging.getLogger(__name__)
-#: Seconds a child may take beyond the request's own budget (start-up, numeric checks, the answer).
+#: Seconds a child may take beyond the caller's safety cap (start-up, numeric checks, the answer).
 GRACE_S = 10.0
 
 _CONTEXT = multiprocessing.get_context("forkserver")

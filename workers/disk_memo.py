@@ -98,18 +98,6 @@ def versions() -> dict[str, str]:
     return out
 
 
-#: Details of a check that a budget or a busy process left undecided: such a result depends on the
-#: machine's load, not only on the code, and is not remembered.
-LOAD_DEPENDENT = ("did not finish within", "not started:", "budget exhausted", "within the budget")
-
-
-def deterministic(result: object) -> bool:
-    """Whether ``result`` (JSON) holds no verdict left undecided by a time budget or a busy process:
-    only such results may be remembered whole (the paper report, a symbolic request's answer)."""
-    text = json.dumps(result, default=str)
-    return not any(marker in text for marker in LOAD_DEPENDENT)
-
-
 def default_directory() -> Path:
     """``$XDG_CACHE_HOME/nonholonomic``, else ``~/.cache/nonholonomic``."""
     base = os.environ.get("XDG_CACHE_HOME")

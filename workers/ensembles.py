@@ -21,6 +21,7 @@ from schemas.ensembles import EnsembleRequest
 from schemas.results import member_to_json
 from store.ensembles import EnsembleStore
 from workers.job_store import write_until_stored
+from workers.jobs import use_safety_cap
 from workers.limits import Deadline
 
 #: Seconds between progress writes (and cancellation checks) of a running chunk.
@@ -56,6 +57,7 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
     if spec is None:
         return "cancelled"  # expired or never created
     start, stop = spec[1][chunk]
+    use_safety_cap()
     store.mark_started(ensemble_id, chunk)
     request = EnsembleRequest.model_validate(spec[0])
     last = [time.monotonic()]

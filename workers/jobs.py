@@ -27,6 +27,15 @@ class NonFiniteResult(ArithmeticError):
     """A number of the result is NaN or infinite (it overflowed); the job fails naming it."""
 
 
+def use_safety_cap() -> None:
+    """Wait at most ``symbolic_safety_cap_s`` for one symbolic step in this process (a job past it fails
+    saying so: :class:`nonholonomic.bounded.SafetyCapExceeded`, never a different verdict)."""
+    from nonholonomic import bounded
+    from schemas.settings import get_settings
+
+    bounded.set_safety_cap(get_settings().symbolic_safety_cap_s)
+
+
 def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -> dict[str, Any]:
     """Run one simulation job.
 
@@ -42,6 +51,7 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
         The ``SimulationResultModel`` as JSON. The same request gives the same numbers
         (only ``integration.wall_time_s`` differs).
     """
+    use_safety_cap()
     if request.get("job") == REPORT_JOB:
         return run_report(request, progress)
     job = JobRequest.model_validate(request)
@@ -73,18 +83,18 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
 def run_report(request: dict[str, Any], progress: ProgressCallback | None = None) -> dict[str, Any]:
     """Run the paper report (every claim, or ``claims``); returns the ``PaperReport`` as JSON.
 
-    The report depends only on the code and the libraries: a complete one whose every check was
-    decided within its budget is remembered (:mod:`workers.disk_memo`, keyed by the code's
+    The report depends only on the code and the libraries (every check is decided by deterministic
+    limits, never by a clock): a complete one is remembered (:mod:`workers.disk_memo`, keyed by the code's
     fingerprint) and the next request for the same claims is answered from it, its ``computed``
     saying when, in how long and with which versions. Cancelling stops between claims
     (:class:`IntegrationCancelled` is raised, as for a simulation).
     """
     from datetime import UTC, datetime
 
-    from nonholonomic import bounded, memo
+    from nonholonomic import memo
     from nonholonomic.integration import IntegrationCancelled
     from nonholonomic.report import paper_report
-    from workers.disk_memo import deterministic, install_from_settings, response_fingerprint, versions
+    from workers.disk_memo import install_from_settings, response_fingerprint, versions
 
     job = PaperReportRequest.model_validate(request)
     problems = job.problems()
@@ -97,14 +107,13 @@ def run_report(request: dict[str, Any], progress: ProgressCallback | None = None
         if progress is not None:
             progress(1.0)
         return {**report, "computed": {**report["computed"], "cached": True}}
-    before = bounded.cut_short_count()
+    use_safety_cap()
     report = paper_report(progress, only=job.claims)
-    cut = bounded.cut_short_count() - before  # checks a budget left undecided: not remembered
     if not report["complete"]:
         raise IntegrationCancelled("the report was cancelled")
     report["computed"] = {"at": datetime.now(UTC).isoformat(timespec="seconds"), "seconds": report["seconds"],
                           "versions": versions(), "project": project(), "cached": False}
-    if key is not None and cut == 0 and deterministic(report):
+    if key is not None:
         memo.keep(key, report)
     return report
 
@@ -142,7 +151,7 @@ def warm_up(state: WarmUp | None = None) -> WarmUp:
     start = time.perf_counter()
     disk = install_from_settings()
     state.cache = str(disk.directory) if disk is not None else "off"
-    from nonholonomic.evidence.measure import symbolic_divergence_vanishes
+    from nonholonomic.evidence.measure import start_divergence_proof
     from nonholonomic.integration import MACHINE_EPSILON, heyoka_template
     from nonholonomic.kernels import numeric
     from nonholonomic.systems import SUPPORTED_POTENTIALS, SURFACE_KINDS, get_system
@@ -156,7 +165,7 @@ def warm_up(state: WarmUp | None = None) -> WarmUp:
         system = get_system(kind, potential)
         heyoka_template(system, MACHINE_EPSILON)
         numeric(system).compile_all()
-        symbolic_divergence_vanishes(system, budget_s=0)  # starts the proof; it finishes in its own thread
+        start_divergence_proof(system)  # it finishes in its own thread; a job then reads its verdict
         state.done += 1
         if disk is not None:
             state.read_back, state.derived = disk.hits, disk.saves

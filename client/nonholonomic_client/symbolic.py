@@ -40,8 +40,8 @@ class SymbolicRoutes(BaseClient):
         Raises
         ------
         ApiError
-            422 naming an expression the parser refuses; 408 when the symbolic work runs past its
-            budget; 503 when the symbolic pool is full (``retry_after`` says when to retry).
+            422 naming an expression the parser refuses; 503 when the symbolic pool is full or the work
+            passed the machine's safety cap (not a verdict; ``retry_after`` says when to retry).
         """
         return dict(self._json("POST", "/v1/hamiltonize", json=request))
 

@@ -13,8 +13,10 @@ Symbolic checks keep the parameters as symbols: an expression is put over a comm
 Chaplygin's ball bracket eq. (2604-6) and its Casimir γ² are rational; the Casimir (L, γ)/ρ_μ contains
 ``sqrt(det I_Q)`` and still reduces this way). A non-rational numerator that does not expand to 0 is
 evaluated at random rational points with 50 digits: a clearly non-zero value disproves the identity,
-otherwise the check stays undecided. Each proof runs under a time budget and is cached per
-process (:mod:`nonholonomic.bounded`; a later call gets the result of a proof that outlived its budget).
+otherwise the check stays undecided. Each proof runs to its end and is cached per process
+(:mod:`nonholonomic.bounded`); an expression (a Jacobiator, a bracket {C, x_i}, an entry P_ij + P_ji) of
+more than ``max_proof_ops`` sympy operations (:mod:`nonholonomic.work_limits`) is not tried, and the check
+says so: the same verdict and words on every machine, whatever its load.
 
 Pointwise checks evaluate the individual terms (exact symbolic derivatives, compiled with
 :func:`nonholonomic.kernels.vectorize` over ``variables + parameters``) and report
@@ -29,19 +31,20 @@ but (L, γ)/ρ_μ is no longer a Casimir; with J_i J_j → I_i I_j Jacobi fails.
 from __future__ import annotations
 
 import itertools
-import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
-from nonholonomic import bounded
+from nonholonomic import bounded, work_limits
 from nonholonomic.brackets import PoissonStructure
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.kernels import vectorize
+from nonholonomic.work_limits import MAX_PROOF_OPS, WorkLimits, operations, over
 
 #: Pointwise relative residual accepted as round-off.
 POINTWISE_TOLERANCE = 1e-10
@@ -111,11 +114,15 @@ def _is_rational_polynomial(expr: sp.Expr) -> bool:
     return sp.Poly(expr, *symbols).domain in (sp.ZZ, sp.QQ)
 
 
-def _vanishes(expr: sp.Expr) -> tuple[bool | None, str]:
-    """Whether ``expr ≡ 0``: numerator over a common denominator, expanded; else numeric confirmation."""
+def _vanishes(expr: sp.Expr, max_ops: int = MAX_PROOF_OPS) -> tuple[bool | None, str]:
+    """Whether ``expr ≡ 0``: numerator over a common denominator, expanded; else numeric confirmation.
+    Not tried (None, the reason) on an expression of more than ``max_ops`` sympy operations."""
     expr = sp.sympify(expr)
     if expr == 0:
         return True, "is 0"
+    skipped = over(operations(expr), max_ops, "max_proof_ops")
+    if skipped is not None:
+        return None, skipped
     numerator = sp.expand(sp.numer(sp.together(expr)))
     if numerator == 0:
         return True, "numerator over a common denominator expands to 0"
@@ -151,11 +158,11 @@ def jacobiator_terms(ps: PoissonStructure, i: int, j: int, k: int) -> list[sp.Ex
     return terms
 
 
-def _prove_jacobi(ps: PoissonStructure) -> tuple[bool | None, str]:
+def _prove_jacobi(ps: PoissonStructure, max_ops: int = MAX_PROOF_OPS) -> tuple[bool | None, str]:
     names = [str(v) for v in ps.variables]
     undecided = []
     for i, j, k in _triples(len(ps.variables)):
-        verdict, detail = _vanishes(sp.Add(*jacobiator_terms(ps, i, j, k)))
+        verdict, detail = _vanishes(sp.Add(*jacobiator_terms(ps, i, j, k)), max_ops)
         if verdict is False:
             return False, f"J for ({names[i]}, {names[j]}, {names[k]}): {detail}"
         if verdict is None:
@@ -165,22 +172,32 @@ def _prove_jacobi(ps: PoissonStructure) -> tuple[bool | None, str]:
     return True, f"all {len(_triples(len(ps.variables)))} Jacobiators J_ijk (i<j<k) reduce to 0, parameters symbolic"
 
 
-def jacobi_symbolic(ps: PoissonStructure, budget_s: float = 20.0) -> tuple[bool | None, str]:
+def _jacobi_task(ps: PoissonStructure, limits: WorkLimits) -> tuple[tuple, Callable[..., Any], tuple]:
+    return ("jacobi", limits.max_proof_ops) + _key(ps), _prove_jacobi, (ps, limits.max_proof_ops)
+
+
+def jacobi_symbolic(ps: PoissonStructure, limits: WorkLimits = work_limits.DEFAULT) -> tuple[bool | None, str]:
     """Whether every Jacobiator ``J_ijk`` (i < j < k) vanishes identically, parameters symbolic.
 
     Parameters
     ----------
     ps : the structure (its matrix ``P_ij = {x_i, x_j}``).
-    budget_s : seconds to wait for the proof; it runs in a daemon thread and is cached per
-        structure, so a later call gets the result of a proof that outlived its budget.
+    limits : each Jacobiator is tried when it has at most ``limits.max_proof_ops`` sympy operations
+        (else it is undecided, the detail names the limit). The proof runs to its end in a thread of
+        its own and is cached per structure and limit (:mod:`nonholonomic.bounded`).
 
     Returns
     -------
     (verdict, detail)
         ``True`` (proved), ``False`` (a Jacobiator is not identically zero; the detail names it) or
-        ``None`` (undecided: budget exhausted or a non-rational expression not reduced).
+        ``None`` (undecided: a Jacobiator past the limit, or a non-rational expression not reduced).
+
+    Raises
+    ------
+    nonholonomic.bounded.SafetyCapExceeded
+        If the proof outlives the service's safety cap (a failure, not a verdict).
     """
-    return bounded.prove(("jacobi",) + _key(ps), _prove_jacobi, (ps,), budget_s)
+    return bounded.prove(*_jacobi_task(ps, limits))
 
 
 class _GroupedSums:
@@ -265,10 +282,10 @@ def casimir_brackets(ps: PoissonStructure, C: sp.Expr) -> list[list[sp.Expr]]:
     return [[t for t in (grad[j] * ps.matrix[j, i] for j in range(n)) if t != 0] for i in range(n)]
 
 
-def _prove_casimir(ps: PoissonStructure, C: sp.Expr) -> tuple[bool | None, str]:
+def _prove_casimir(ps: PoissonStructure, C: sp.Expr, max_ops: int = MAX_PROOF_OPS) -> tuple[bool | None, str]:
     undecided = []
     for xi, terms in zip(ps.variables, casimir_brackets(ps, C)):
-        verdict, detail = _vanishes(sp.Add(*terms))
+        verdict, detail = _vanishes(sp.Add(*terms), max_ops)
         if verdict is False:
             return False, f"{{C, {xi}}} {detail}"
         if verdict is None:
@@ -278,27 +295,36 @@ def _prove_casimir(ps: PoissonStructure, C: sp.Expr) -> tuple[bool | None, str]:
     return True, "{C, x_i} reduces to 0 for every i, parameters symbolic"
 
 
-def casimir_symbolic(ps: PoissonStructure, C: sp.Expr, budget_s: float = 20.0) -> tuple[bool | None, str]:
-    """Whether ``{C, x_i} ≡ 0`` for every i (daemon thread under ``budget_s``, cached)."""
+def _casimir_task(ps: PoissonStructure, C: sp.Expr, limits: WorkLimits) -> tuple[tuple, Callable[..., Any], tuple]:
     C = sp.sympify(C)
-    return bounded.prove(("casimir", C) + _key(ps), _prove_casimir, (ps, C), budget_s)
+    return ("casimir", C, limits.max_proof_ops) + _key(ps), _prove_casimir, (ps, C, limits.max_proof_ops)
 
 
-def casimir_checks(ps: PoissonStructure, budget_s: float = 20.0) -> list[tuple[str, bool | None, str]]:
-    """For each claimed Casimir ``C`` in ``ps.casimirs``: ``(name, verdict, detail)`` of ``{C, x_i} ≡ 0 ∀ i``.
+def casimir_symbolic(ps: PoissonStructure, C: sp.Expr,
+                     limits: WorkLimits = work_limits.DEFAULT) -> tuple[bool | None, str]:
+    """Whether ``{C, x_i} ≡ 0`` for every i (run to its end in a thread of its own, cached); each
+    ``{C, x_i}`` is tried when it has at most ``limits.max_proof_ops`` sympy operations.
 
-    ``budget_s`` bounds the total wait over all Casimirs (the proofs run concurrently).
+    Raises
+    ------
+    nonholonomic.bounded.SafetyCapExceeded
+        If the proof outlives the service's safety cap (a failure, not a verdict).
     """
-    deadline = time.monotonic() + budget_s
-    # Start every proof first so that they share the budget.
-    with bounded.peeking():
-        for _, C in ps.casimirs:
-            casimir_symbolic(ps, C, 0.0)
-    out = []
-    for name, C in ps.casimirs:
-        verdict, detail = casimir_symbolic(ps, C, deadline - time.monotonic())
-        out.append((name, verdict, detail))
-    return out
+    return bounded.prove(*_casimir_task(ps, C, limits))
+
+
+def _start_casimirs(ps: PoissonStructure, candidates: Sequence[sp.Expr], limits: WorkLimits) -> None:
+    """Start the Casimir proofs at once, each in its own thread (they run side by side)."""
+    for C in candidates:
+        bounded.start(*_casimir_task(ps, C, limits))
+
+
+def casimir_checks(ps: PoissonStructure,
+                   limits: WorkLimits = work_limits.DEFAULT) -> list[tuple[str, bool | None, str]]:
+    """For each claimed Casimir ``C`` in ``ps.casimirs``: ``(name, verdict, detail)`` of ``{C, x_i} ≡ 0 ∀ i``
+    (the proofs run side by side, each to its end; ``limits`` as in :func:`casimir_symbolic`)."""
+    _start_casimirs(ps, [C for _, C in ps.casimirs], limits)
+    return [(name, *casimir_symbolic(ps, C, limits)) for name, C in ps.casimirs]
 
 
 @lru_cache(maxsize=256)
@@ -349,7 +375,7 @@ def rank_at(ps: PoissonStructure, point: np.ndarray, parameters: np.ndarray | No
 # --------------------------------------------------------------------------------------------
 
 def structure_evidence(ps: PoissonStructure, points: np.ndarray, parameters: np.ndarray | None = None,
-                       budget_s: float = 20.0) -> list[CheckEvidence]:
+                       limits: WorkLimits = work_limits.DEFAULT) -> list[CheckEvidence]:
     """Symbolic and pointwise evidence that ``ps`` is a Poisson structure with the claimed Casimirs.
 
     Items: ``jacobi_identity`` (methods ``symbolic`` and ``pointwise``, tolerance 1e-10), one
@@ -357,15 +383,12 @@ def structure_evidence(ps: PoissonStructure, points: np.ndarray, parameters: np.
     ``max |{C, x_i}| / Σ_j |∂_j C P_ji|`` at ``points``; if the proof is undecided a residual above
     1e-6 counts as a disproof) and ``rank_on_leaf`` (numeric rank at ``points``: passed iff it is
     the same at every point and even, as the rank of a Poisson tensor on a symplectic leaf must be).
-    ``budget_s`` bounds the total wait for the symbolic proofs.
+    ``limits`` bounds the size of what the symbolic proofs are tried on (:func:`jacobi_symbolic`).
     """
-    deadline = time.monotonic() + budget_s
     X = _points(ps, points)
     p = _parameter_vector(ps, parameters)
-    with bounded.peeking():  # start the Casimir proofs alongside the Jacobi one
-        for _, C in ps.casimirs:
-            casimir_symbolic(ps, C, 0.0)
-    proven, detail = jacobi_symbolic(ps, budget_s=budget_s)
+    _start_casimirs(ps, [C for _, C in ps.casimirs], limits)  # alongside the Jacobi proof
+    proven, detail = jacobi_symbolic(ps, limits)
     residual = jacobi_pointwise(ps, X, p)
     items = [
         CheckEvidence(
@@ -382,7 +405,7 @@ def structure_evidence(ps: PoissonStructure, points: np.ndarray, parameters: np.
         ),
     ]
     for name, C in ps.casimirs:
-        verdict, cdetail = casimir_symbolic(ps, C, deadline - time.monotonic())
+        verdict, cdetail = casimir_symbolic(ps, C, limits)
         res = casimir_pointwise(ps, C, X, p)
         if verdict is None and np.isfinite(res) and res > POINTWISE_DISPROOF:
             verdict, cdetail = False, cdetail + f"; pointwise residual {res:.3g} > {POINTWISE_DISPROOF:g} disproves it"
@@ -419,11 +442,12 @@ def _short(expr: sp.Expr, limit: int = 200) -> str:
     return s if len(s) <= limit else s[:limit] + "..."
 
 
-def _prove_antisymmetry(P: sp.Matrix, names: Sequence[str]) -> tuple[bool | None, str, list[dict]]:
+def _prove_antisymmetry(P: sp.Matrix, names: Sequence[str],
+                        max_ops: int = MAX_PROOF_OPS) -> tuple[bool | None, str, list[dict]]:
     offending, undecided = [], []
     for i in range(P.rows):
         for j in range(i, P.cols):
-            verdict, _ = _vanishes(P[i, j] + P[j, i])
+            verdict, _ = _vanishes(P[i, j] + P[j, i], max_ops)
             if verdict is not True:
                 entry = {"entry": [i, j], "bracket": f"{{{names[i]}, {names[j]}}} + {{{names[j]}, {names[i]}}}",
                          "sum": _short(sp.expand(P[i, j] + P[j, i])),
@@ -439,7 +463,7 @@ def _prove_antisymmetry(P: sp.Matrix, names: Sequence[str]) -> tuple[bool | None
 def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
                         casimir_candidates: Mapping[str, sp.Expr] | None = None,
                         parameters: Mapping[sp.Symbol, float] | None = None,
-                        budget_s: float = 10.0, samples: int = 20, seed: int = 0) -> dict:
+                        limits: WorkLimits = work_limits.DEFAULT, samples: int = 20, seed: int = 0) -> dict:
     """Check a user's bracket ``P_ij = {x_i, x_j}``: antisymmetry, Jacobi, Casimir candidates, rank.
 
     Parameters
@@ -448,7 +472,9 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
     matrix : ``n × n`` sympy matrix of ``{x_i, x_j}``.
     casimir_candidates : name → C; checked by ``{C, x_i} ≡ 0`` for all i.
     parameters : values of the other symbols; substituted as exact decimals (0.1 → 1/10).
-    budget_s : total seconds for the symbolic checks; an undecided check falls back to pointwise.
+    limits : the symbolic checks are tried on expressions of at most ``limits.max_proof_ops`` sympy
+        operations each (:mod:`nonholonomic.work_limits`); an undecided check falls back to pointwise,
+        its detail saying why. Every proof runs to its end; the answer is the same on every machine.
     samples, seed : random points, each variable uniform in [-2, 2].
 
     Returns
@@ -467,8 +493,9 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
         For a non-square matrix, a size different from the number of variables (or above
         ``MAX_USER_DIMENSION``), repeated or non-symbol variables, a non-numeric parameter value,
         a free symbol that is neither a variable nor a given parameter, or an undefined function.
+    nonholonomic.bounded.SafetyCapExceeded
+        If a proof outlives the service's safety cap (a failure, not a verdict).
     """
-    deadline = time.monotonic() + budget_s
     variables = tuple(variables)
     matrix = sp.Matrix(matrix)
     if matrix.rows != matrix.cols:
@@ -519,17 +546,15 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
     X = np.random.default_rng(seed).uniform(-2.0, 2.0, (samples, n))
     p = np.zeros(0)
 
-    # Start every proof; they share the budget.
-    antisymmetry_key = ("antisymmetry",) + _key(ps)
-    bounded.start(antisymmetry_key, _prove_antisymmetry, (P, tuple(names)))
-    with bounded.peeking():
-        jacobi_known = jacobi_symbolic(ps, 0.0)  # what is known at the call: all a budget of 0 may use
-        for C in candidates.values():
-            casimir_symbolic(ps, C, 0.0)
+    # Start every proof at once: they run side by side, each to its end.
+    antisymmetry = (("antisymmetry", limits.max_proof_ops) + _key(ps), _prove_antisymmetry,
+                    (P, tuple(names), limits.max_proof_ops))
+    bounded.start(*antisymmetry)
+    bounded.start(*_jacobi_task(ps, limits))
+    _start_casimirs(ps, list(candidates.values()), limits)
 
     # Antisymmetry.
-    verdict, detail, offending = bounded.verdict(
-        bounded.run(antisymmetry_key, _prove_antisymmetry, (P, tuple(names)), deadline - time.monotonic()))
+    verdict, detail, offending = bounded.verdict(bounded.run(*antisymmetry))
     anti_res = _max_residual(_GroupedSums([[P[i, j], P[j, i]] for i in range(n) for j in range(i, n)], variables),
                              X, p)
     method = "symbolic"
@@ -540,10 +565,7 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
                      "offending": list(offending or []), "detail": detail}
 
     # Jacobi.
-    remaining = deadline - time.monotonic()
-    verdict, detail = jacobi_symbolic(ps, remaining) if remaining > 0 else jacobi_known
-    if verdict is None and remaining <= 0:
-        bounded.cut_short()  # no budget left for the proof
+    verdict, detail = jacobi_symbolic(ps, limits)
     jac_res = jacobi_pointwise(ps, X)
     finite = int(np.sum(_jacobi_kernel(ps).residuals(X, p)[1]))
     method = "symbolic"
@@ -561,7 +583,7 @@ def verify_user_bracket(variables: Sequence[sp.Symbol], matrix: sp.Matrix,
     # Casimir candidates.
     casimirs = []
     for name, C in candidates.items():
-        verdict, detail = casimir_symbolic(ps, C, deadline - time.monotonic())
+        verdict, detail = casimir_symbolic(ps, C, limits)
         res = casimir_pointwise(ps, C, X)
         method = "symbolic"
         if verdict is None:

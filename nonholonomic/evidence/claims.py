@@ -1,6 +1,7 @@
 """A researcher's own claims of conservation: a candidate integral or Casimir ``I(x)``, checked along
 the trajectory (its drift, as for the system's integrals) and symbolically (its derivative along the
-field, ``dI/dt = Σ ∂I/∂x_i f_i``, is identically zero, decided within a time budget).
+field, ``dI/dt = Σ ∂I/∂x_i f_i``, is identically zero: a proof run to its end, tried on a derivative of
+at most ``max_proof_ops`` sympy operations, :mod:`nonholonomic.work_limits`).
 
 The expression is parsed by the safe parser (:mod:`nonholonomic.expressions`, no eval) in the state
 components and the parameters' symbols of the system (``M1``, ``gamma3``, ``I1``, ``D``, a user
@@ -15,15 +16,14 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from nonholonomic import bounded
+from nonholonomic import bounded, work_limits
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import integral_tolerance
 from nonholonomic.expressions import _name_problem, parse_expression
 from nonholonomic.integration import Trajectory
 from nonholonomic.kernels import vectorize
+from nonholonomic.work_limits import WorkLimits, operations, over
 
-#: Seconds for the symbolic proof of one claim (it goes on in the background after a timeout).
-CLAIM_BUDGET_S = 5.0
 #: Largest numerator (terms) handed to ``sympy.simplify`` (functions of the state, e.g. trigonometric).
 MAX_SIMPLIFY_TERMS = 200
 #: Most claims a job may carry.
@@ -36,7 +36,8 @@ class ClaimEvidence:
 
     ``max_rel_drift = max |I − I(0)| / max(|I(0)|, max |I|)`` over the samples and the accepted steps.
     ``symbolic`` is True (proven identically zero), False (not identically zero: it may still hold on
-    the constraints' level set, e.g. |γ| = 1), or None (undecided within the budget).
+    the constraints' level set, e.g. |γ| = 1), or None (undecided: ``symbolic_detail`` says why, e.g. the
+    derivative is past ``max_proof_ops``).
     """
 
     name: str
@@ -77,9 +78,18 @@ def _prove_zero(derivative: sp.Expr) -> tuple[bool, str]:
 
 
 def claim_evidence(system: MechanicalSystem, parameters: np.ndarray, trajectory: Trajectory,
-                   claims: Sequence[tuple[str, str]], budget_s: float = CLAIM_BUDGET_S) -> list[ClaimEvidence]:
+                   claims: Sequence[tuple[str, str]],
+                   limits: WorkLimits = work_limits.DEFAULT) -> list[ClaimEvidence]:
     """Evidence for each ``(name, expression)`` claim on ``trajectory`` (the system's parameter vector
-    ``parameters``): the drift at the samples and steps, and the symbolic verdict on ``dI/dt``."""
+    ``parameters``): the drift at the samples and steps, and the symbolic verdict on ``dI/dt`` (a proof
+    run to its end, tried on a derivative of at most ``limits.max_proof_ops`` sympy operations; past it
+    the verdict is None with that reason).
+
+    Raises
+    ------
+    nonholonomic.bounded.SafetyCapExceeded
+        If a proof outlives the service's safety cap (a failure, not a verdict).
+    """
     out = []
     points = np.vstack([trajectory.states, trajectory.step_states])
     tol = integral_tolerance(trajectory.tolerance)
@@ -91,8 +101,12 @@ def claim_evidence(system: MechanicalSystem, parameters: np.ndarray, trajectory:
         initial, final = float(values[0]), float(values[len(trajectory.t) - 1])
         reference = max(abs(initial), float(np.max(np.abs(values)))) or 1.0
         drift = float(np.max(np.abs(values - initial))) / reference
-        proven, detail = bounded.prove(("claim", system, claim), _prove_zero,
-                                       (derivative_along_field(system, claim),), budget_s)
+        derivative = derivative_along_field(system, claim)
+        skipped = over(operations(derivative), limits.max_proof_ops, "max_proof_ops", "dI/dt: the symbolic proof")
+        if skipped is not None:
+            proven, detail = None, skipped
+        else:
+            proven, detail = bounded.prove(("claim", system, claim), _prove_zero, (derivative,))
         out.append(ClaimEvidence(name=name, expression=text, initial=initial, final=final,
                                  max_rel_drift=drift, tolerance=tol,
                                  passed=bool(np.isfinite(drift) and drift <= tol), symbolic=proven,

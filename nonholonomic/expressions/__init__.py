@@ -60,13 +60,16 @@ Resource guards (all checked *before* sympy builds the offending object)
   function or a power to constant arguments, a small outward-rounded float interval arithmetic
   encloses the result; it must be real, finite and at most :data:`MAX_CONSTANT_MAGNITUDE` in size, and a
   denominator must certainly be non-zero. ``exp(c*log(b))``, which sympy rewrites into ``b**c``, is
-  refused for ``|c| > 64``;
-* a cumulative wall-clock budget :data:`PARSE_BUDGET_S` (checked between nodes).
+  refused for ``|c| > 64``.
 
-Measured (tests/unit/test_expressions.py): every refusal, and the slowest accepted 2000-character
-inputs (e.g. 60 ``sign(sin(k)**2 + cos(k)**2 - 1)``, which sympy evaluates numerically), take < 1 s.
-Pass 2 still relies on sympy's automatic evaluation being cheap for certified constants; refused
-inputs are never handed to sympy.
+No clock decides anything here: every guard is a deterministic measure of the text or of what sympy
+built, so the same expression is accepted or refused (an :class:`ExpressionError`, a 422 in the API)
+with the same words on every machine and at any load. These limits bound the work: measured
+(tests/unit/test_expressions.py), every refusal, and the slowest accepted 2000-character inputs (e.g.
+60 ``sign(sin(k)**2 + cos(k)**2 - 1)``, which sympy evaluates numerically), take < 1 s. Pass 2 still
+relies on sympy's automatic evaluation being cheap for certified constants; refused inputs are never
+handed to sympy. A machine too loaded to finish is for the caller's safety cap to report (the symbolic
+routes parse in a child process under theirs: a 503, never a refusal of the expression).
 """
 
 from nonholonomic.expressions.grammar import (
@@ -84,7 +87,6 @@ from nonholonomic.expressions.limits import (
     MAX_NAME_LENGTH,
     MAX_NUMBER_BITS,
     MAX_RESULT_EXPONENT,
-    PARSE_BUDGET_S,
 )
 from nonholonomic.expressions.names import (
     ALLOWED_CONSTANTS,
@@ -109,7 +111,6 @@ __all__ = [
     "MAX_NAME_LENGTH",
     "MAX_NUMBER_BITS",
     "MAX_RESULT_EXPONENT",
-    "PARSE_BUDGET_S",
     "RESERVED_NAMES",
     "ExpressionError",
     "_Parser",

@@ -1,4 +1,8 @@
-"""The resource limits of the safe parser (see :mod:`nonholonomic.expressions`)."""
+"""The resource limits of the safe parser (see :mod:`nonholonomic.expressions`).
+
+All are deterministic measures of the input (lengths, counts, exponents, bits, certified magnitudes): the
+same text is accepted or refused, with the same words, on every machine and at any load. No clock
+decides a refusal."""
 
 from __future__ import annotations
 
@@ -18,5 +22,3 @@ MAX_NUMBER_BITS = 512
 MAX_CONSTANT_MAGNITUDE = 1e150
 #: Entries of a matrix accepted by :func:`parse_matrix` (override with ``max_entries=``).
 MAX_MATRIX_ENTRIES = 400
-#: Cumulative seconds one :func:`parse_expression` call may spend building sympy objects.
-PARSE_BUDGET_S = 5.0

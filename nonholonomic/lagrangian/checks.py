@@ -11,6 +11,8 @@ zeros in M) is said in those terms.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import numpy as np
 import sympy as sp
 
@@ -150,3 +152,42 @@ def check_sample_points(data: LagrangianData, rests: tuple[sp.Expr, ...] = ()) -
             return
     raise DataError("constraints", "A M^-1 A^T is singular at every sample point: the multipliers are not "
                                    "determined (is the mass matrix indefinite?)")
+
+
+def field_problem(data: LagrangianData, q: Sequence[float], qdot: Sequence[float],
+                  values: Mapping[sp.Symbol, float] | None = None) -> str | None:
+    """Why the Lagrange–d'Alembert field of ``data`` is not determined at the state (q, q̇), or None.
+
+    Numbers only (M, h, A and Ȧ q̇ evaluated there, then q̈ = M⁻¹(Aᵀλ − h) with
+    λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ h − Ȧ q̇) solved in floating point): what a request's initial state is
+    checked with before the equations are derived, in milliseconds whatever the system's size.
+
+    Parameters
+    ----------
+    data : LagrangianData
+        The parsed system.
+    q, qdot : sequence of float
+        The state.
+    values : mapping, optional
+        The parameters' values (default: the system's own).
+    """
+    from nonholonomic.lagrangian.equations import dynamics_terms
+
+    point: dict[sp.Symbol, float] = {**dict(zip(data.q, map(float, q))), **dict(zip(data.v, map(float, qdot))),
+                                     data.t: 0.0, **dict(values if values is not None else data.parameter_values)}
+    M, h, A, Adot_v = dynamics_terms(data)
+    Mn, An = numeric_matrix(M, point), numeric_matrix(A, point) if A.shape[0] else np.zeros((0, len(data.q)))
+    hn, dn = numeric_matrix(sp.Matrix(h), point), numeric_matrix(sp.Matrix(Adot_v), point) if Adot_v else np.zeros((0, 1))
+    if Mn is None or An is None or hn is None or dn is None:
+        return "L or a constraint is not real and finite there"
+    if not regular(Mn):
+        return "the mass matrix d2L/dq_dot2 is singular there"
+    W, u = np.linalg.solve(Mn, An.T), np.linalg.solve(Mn, hn[:, 0])
+    if An.shape[0]:
+        S = An @ W
+        if not regular(S):
+            return "A M^-1 A^T is singular there: the multipliers are not determined"
+        qddot = W @ np.linalg.solve(S, An @ u - dn[:, 0]) - u
+    else:
+        qddot = -u
+    return None if np.all(np.isfinite(qddot)) else "the accelerations are not finite there"

@@ -24,9 +24,12 @@ M⁻¹ is never formed: M is solved once for the k + 1 right-hand sides Aᵀ and
 exact rational-function arithmetic, sin and cos of a coordinate as generators with sin² + cos² = 1
 (:mod:`nonholonomic.lagrangian.fractions`: every entry one reduced fraction after every step); an
 expression that does not fit it falls back to LU on expression trees, each entry cancelled (``tidy``);
-a system too large for either (a rattleback) is eliminated without cancellation (:func:`_plain_solve`:
-correct and small as a DAG, but no closed form for the structure searches).
-The whole derivation runs under :func:`nonholonomic.bounded.run`.
+a system too large for either (a rattleback, Chaplygin's sphere) is eliminated without cancellation
+(:func:`_plain_solve`: correct and small as a DAG, but no closed form for the structure searches).
+Which path is taken is decided by deterministic measures of the work, never by a clock: the operations of
+M, h and A (:data:`FRACTIONS_MAX_OPS`) and the terms an entry reaches during the exact elimination
+(:data:`~nonholonomic.lagrangian.fractions.MAX_FRACTION_TERMS`); the same system takes the same path on
+every machine. The derivation runs under :func:`nonholonomic.bounded.run` (shared, cached, a safety cap).
 """
 
 from __future__ import annotations
@@ -43,8 +46,6 @@ from nonholonomic import bounded
 from nonholonomic.lagrangian.checks import mass_matrix, number, numeric_matrix, sample_points
 from nonholonomic.lagrangian.parse import LagrangianData
 
-#: Seconds the symbolic derivation may take by default.
-DERIVATION_BUDGET_S = 60.0
 #: M, h and A with more operations than this are eliminated without cancellation (the Suslov problem in Euler
 #: angles has 310, a rattleback with a paraboloid bottom 2400: a single gcd of its fractions takes minutes).
 FRACTIONS_MAX_OPS = 1000
@@ -55,7 +56,7 @@ CANCEL_MAX_OPS = 4000
 
 
 class DerivationError(RuntimeError):
-    """The symbolic derivation did not finish within its budget, or sympy failed on it."""
+    """Sympy failed on the symbolic derivation (the reason says where)."""
 
 
 @dataclass(frozen=True)
@@ -86,9 +87,11 @@ class EquationsOfMotion:
     constraints : tuple of sympy.Expr
         The constraint functions A q̇ (each = 0 on the motion).
     seconds : float
-        How long the derivation took.
+        How long the derivation took (a timing field).
     closed_form : bool
         Whether q̈ is a cancelled closed form (else the plain elimination's DAG).
+    elimination : str
+        Why the plain elimination was taken (a deterministic size measure), or "" for a closed form.
     """
 
     q: tuple[sp.Symbol, ...]
@@ -107,6 +110,7 @@ class EquationsOfMotion:
     closed_form: bool = True
     """False when the elimination ran without cancellation (:func:`_plain_solve`): q̈ is correct but no
     closed form the structure searches could work on."""
+    elimination: str = ""
 
     @property
     def state(self) -> tuple[sp.Symbol, ...]:
@@ -194,8 +198,10 @@ def _solve(M: sp.Matrix, B: sp.Matrix, points: list[dict[sp.Symbol, float]]) -> 
     return b
 
 
-def _terms(data: LagrangianData) -> tuple[sp.Matrix, list[sp.Expr], sp.Matrix, list[sp.Expr]]:
-    """M, h, A and Ȧ q̇ (each constraint differentiated along the motion at fixed q̇)."""
+@lru_cache(maxsize=64)
+def dynamics_terms(data: LagrangianData) -> tuple[sp.ImmutableMatrix, tuple[sp.Expr, ...], sp.ImmutableMatrix,
+                                                  tuple[sp.Expr, ...]]:
+    """M, h, A and Ȧ q̇ (each constraint differentiated along the motion at fixed q̇); cached per system."""
     q, v, t, L = data.q, data.v, data.t, data.L
     M = mass_matrix(data)
     p = [sp.diff(L, vi) for vi in v]
@@ -203,21 +209,22 @@ def _terms(data: LagrangianData) -> tuple[sp.Matrix, list[sp.Expr], sp.Matrix, l
          for i in range(len(q))]
     Adot_v = [sum((sp.diff(f, qj) * vj for qj, vj in zip(q, v)), sp.Integer(0)) + sp.diff(f, t)
               for f in data.constraints]
-    return M, h, sp.Matrix(data.A), Adot_v
+    return sp.ImmutableMatrix(M), tuple(h), sp.ImmutableMatrix(data.A), tuple(Adot_v)
 
 
 def _derive_in_fractions(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...]] | None:
     """q̈ and λ in exact rational-function arithmetic (:mod:`nonholonomic.lagrangian.fractions`); None when
     an expression does not fit it (a constant such as pi, a function of a function); raises
-    :class:`~nonholonomic.lagrangian.fractions.TooSlow` for a system too large for it
-    (:data:`FRACTIONS_MAX_OPS`, or past its deadline)."""
-    from nonholonomic.lagrangian.fractions import TooSlow, fractions_for
+    :class:`~nonholonomic.lagrangian.fractions.TooLarge` for a system too large for it
+    (:data:`FRACTIONS_MAX_OPS`, or an entry past :data:`~nonholonomic.lagrangian.fractions.MAX_FRACTION_TERMS`)."""
+    from nonholonomic.lagrangian.fractions import TooLarge, fractions_for
 
-    M, h, A, Adot_v = _terms(data)
+    M, h, A, Adot_v = dynamics_terms(data)
     n, k = len(data.q), A.shape[0]
     exprs = [*M, *h, *A, *Adot_v]
-    if sum(sp.count_ops(e) for e in (*M, *h, *A)) > FRACTIONS_MAX_OPS:
-        raise TooSlow("M, h and A too large for the exact elimination")  # one gcd could outlast any deadline
+    ops = sum(sp.count_ops(e) for e in (*M, *h, *A))
+    if ops > FRACTIONS_MAX_OPS:  # one gcd of such fractions can take minutes
+        raise TooLarge(f"M, h and A have {ops:,} operations > max {FRACTIONS_MAX_OPS:,} (FRACTIONS_MAX_OPS)")
     try:
         F = fractions_for(exprs, data.q, (*data.v, data.t, *data.parameters), sample_points(data))
         Mf = [[F.element(M[i, j]) for j in range(n)] for i in range(n)]
@@ -263,6 +270,25 @@ def _plain_solve(M: list[list[sp.Expr]], B: list[list[sp.Expr]]) -> list[list[sp
     return X
 
 
+def plain_field(data: LagrangianData) -> tuple[sp.Expr, ...]:
+    """q̈ = M⁻¹(Aᵀλ − h), λ = (A M⁻¹ Aᵀ)⁻¹(A M⁻¹ h − Ȧ q̇), by :func:`_plain_solve` on the whole n × n system:
+    no cancellation, no choice of dependent velocities, so it is built in milliseconds for any system (the
+    rattleback: 0.07 s against 1.3 s for :func:`_derive_plain`'s projection). The same field as
+    :func:`derive`'s everywhere (it keeps A q̇ constant), but a large DAG: what a request is checked against
+    (:func:`nonholonomic.systems.lagrangian.outline`), not what a job compiles."""
+    M, h, A, Adot_v = dynamics_terms(data)
+    n, k = len(data.q), A.shape[0]
+    X = _plain_solve([[M[i, j] for j in range(n)] for i in range(n)],
+                     [[*(A[a, i] for a in range(k)), h[i]] for i in range(n)])  # (M⁻¹Aᵀ | M⁻¹h)
+    W, u = [row[:k] for row in X], [row[k] for row in X]
+    if not k:
+        return tuple(-x for x in u)
+    S = [[sp.Add(*(A[a, i] * W[i][b] for i in range(n))) for b in range(k)] for a in range(k)]
+    rhs = [[sp.Add(*(A[a, i] * u[i] for i in range(n))) - Adot_v[a]] for a in range(k)]
+    lam = [row[0] for row in _plain_solve(S, rhs)]
+    return tuple(sp.Add(*(W[i][a] * lam[a] for a in range(k))) - u[i] for i in range(n))
+
+
 def dependent_columns(data: LagrangianData) -> tuple[int, ...] | None:
     """k columns of A to solve the constraints for (the dependent velocities), their minor regular at every
     sample point: a constant minor first, then the shortest, then the latest columns (the first velocities
@@ -287,7 +313,7 @@ def _derive_plain(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.E
     Bᵀ M B u̇ = −Bᵀ (h + M c): an m × m solve instead of n × n and k × k. d/dt (A q̇) = 0 everywhere, as on
     the other paths; the field is the same on the constraint manifold. Correct and small as a DAG, but no
     closed form, so the structure searches do not run on it; no multipliers."""
-    M, h, A, Adot_v = _terms(data)
+    M, h, A, Adot_v = dynamics_terms(data)
     n, k = len(data.q), A.shape[0]
     if not k:
         return tuple(-row[0] for row in _plain_solve([[M[i, j] for j in range(n)] for i in range(n)],
@@ -315,18 +341,18 @@ def _derive_plain(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.E
     return tuple(sp.Add(*(B[j][b] * u_dot[b] for b in range(m) if B[j][b] != 0)) + c[j] for j in range(n)), ()
 
 
-def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], float, bool]:
-    from nonholonomic.lagrangian.fractions import TooSlow
+def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, ...], float, bool, str]:
+    from nonholonomic.lagrangian.fractions import TooLarge
 
     start = time.perf_counter()
     try:
         exact = _derive_in_fractions(data)
-    except TooSlow:
-        return (*_derive_plain(data), time.perf_counter() - start, False)
+    except TooLarge as exc:
+        return (*_derive_plain(data), time.perf_counter() - start, False, str(exc))
     if exact is not None:
-        return (*exact, time.perf_counter() - start, True)
+        return (*exact, time.perf_counter() - start, True, "")
     # an expression the fraction field cannot hold: expression trees, every entry cancelled (slower)
-    M, h_list, A, Adot_list = _terms(data)
+    M, h_list, A, Adot_list = dynamics_terms(data)
     k = A.shape[0]
     h = sp.Matrix([tidy(e) for e in h_list])
     Adot_v = sp.Matrix([tidy(e) for e in Adot_list])
@@ -339,7 +365,7 @@ def _derive(data: LagrangianData) -> tuple[tuple[sp.Expr, ...], tuple[sp.Expr, .
     else:
         lam = sp.zeros(0, 1)
     qddot = (W * lam - u).applyfunc(tidy) if k else (-u).applyfunc(tidy)
-    return tuple(qddot), tuple(lam), time.perf_counter() - start, True
+    return tuple(qddot), tuple(lam), time.perf_counter() - start, True, ""
 
 
 def energy_of(data: LagrangianData) -> sp.Expr | None:
@@ -351,16 +377,13 @@ def energy_of(data: LagrangianData) -> sp.Expr | None:
 
 
 @lru_cache(maxsize=64)
-def derive(data: LagrangianData, budget_s: float = DERIVATION_BUDGET_S) -> EquationsOfMotion:
+def derive(data: LagrangianData) -> EquationsOfMotion:
     """The Lagrange–d'Alembert equations of ``data`` with the multipliers eliminated.
 
     Parameters
     ----------
     data : LagrangianData
         From :func:`nonholonomic.lagrangian.parse.parse_system` (checked: M regular, A of full rank).
-    budget_s : float
-        Seconds the symbolic work may take (:func:`nonholonomic.bounded.run`; a derivation past it goes
-        on in the background and a later call with the same data picks up its result).
 
     Returns
     -------
@@ -369,13 +392,16 @@ def derive(data: LagrangianData, budget_s: float = DERIVATION_BUDGET_S) -> Equat
     Raises
     ------
     DerivationError
-        Past the budget, or when sympy fails.
+        When sympy fails.
+    nonholonomic.bounded.SafetyCapExceeded
+        Still running after the safety cap (a failure of the job, not a verdict).
     """
-    outcome = bounded.run(("lagrangian.derive", data), _derive, (data,), budget_s)
+    outcome = bounded.run(("lagrangian.derive", data), _derive, (data,))
     if outcome.status != "done":
         raise DerivationError(f"the equations of motion could not be derived: {outcome.message}")
-    qddot, lam, seconds, closed_form = outcome.value
+    qddot, lam, seconds, closed_form, elimination = outcome.value
     return EquationsOfMotion(
         q=data.q, qdot=data.v, t=data.t, parameters=data.parameters, values=data.values, qddot=qddot,
         multipliers=lam, energy=energy_of(data), L=data.L, mass_matrix=sp.ImmutableMatrix(mass_matrix(data)),
-        A=data.A, constraints=data.constraints, seconds=seconds, closed_form=closed_form)
+        A=data.A, constraints=data.constraints, seconds=seconds, closed_form=closed_form,
+        elimination=elimination)

@@ -29,10 +29,8 @@ from nonholonomic.lagrangian.chaplygin import ChaplyginReduction, chaplygin_redu
 from nonholonomic.lagrangian.equations import derive, tidy
 from nonholonomic.lagrangian.parse import LagrangianData
 
-__all__ = ["HAMILTONIZATION_BUDGET_S", "Hamiltonization", "hamiltonization"]
+__all__ = ["Hamiltonization", "hamiltonization"]
 
-#: Seconds the reduction, the field comparison and Theorem 1 may take together.
-HAMILTONIZATION_BUDGET_S = 30.0
 #: A difference of the two fields with at most this many operations is cancelled symbolically.
 CANCEL_OPS = 400
 #: Random exact states of the identity test of larger differences.
@@ -150,22 +148,23 @@ def _hamiltonization(data: LagrangianData) -> Hamiltonization:
                                                 "at_values": bool(at_values)})
 
 
-def hamiltonization(data: LagrangianData, budget_s: float = HAMILTONIZATION_BUDGET_S) -> Hamiltonization:
-    """Theorem 1 for ``data`` through its Chaplygin reduction, or why not (within ``budget_s``).
+def hamiltonization(data: LagrangianData) -> Hamiltonization:
+    """Theorem 1 for ``data`` through its Chaplygin reduction, or why not.
+
+    The reduction, the field comparison and Theorem 1 run to their end (:func:`nonholonomic.bounded.run`);
+    their sizes are bounded by deterministic limits (``CANCEL_OPS``, the work limits of
+    :func:`nonholonomic.reducing_multiplier.hamiltonize`), so the verdict is the same on every machine.
 
     Parameters
     ----------
     data : LagrangianData
         Parsed and checked, autonomous.
-    budget_s : float
-        Seconds (:func:`nonholonomic.bounded.run`); past them the verdict is ``undecided``.
 
     Returns
     -------
     Hamiltonization
     """
-    outcome = bounded.run(("lagrangian.hamiltonization", data), _hamiltonization, (data,), budget_s)
+    outcome = bounded.run(("lagrangian.hamiltonization", data), _hamiltonization, (data,))
     if outcome.status != "done":
-        return Hamiltonization(None, None, {"verdict": "undecided", "reason": f"Theorem 1 {outcome.message}"
-                                            if outcome.status != "error" else f"sympy failed: {outcome.message}"})
+        return Hamiltonization(None, None, {"verdict": "undecided", "reason": f"sympy failed: {outcome.message}"})
     return outcome.value  # type: ignore[no-any-return]

@@ -35,17 +35,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import sympy as sp
+from sympy.integrals.rationaltools import ratint
 
 from nonholonomic import bounded
-from nonholonomic.lagrangian.checks import sample_points
+from nonholonomic.lagrangian.checks import number, sample_points
 from nonholonomic.lagrangian.equations import _solve, dependent_columns, derive, tidy
 from nonholonomic.lagrangian.parse import LagrangianData
 from nonholonomic.rational_trig import rational_trig_is_zero
+from nonholonomic.work_limits import MAX_INTEGRATE_OPS, operations, over
 
-__all__ = ["MEASURE_BUDGET_S", "POINTWISE_TOLERANCE", "MeasureVerdict", "measure_verdict"]
+__all__ = ["POINTWISE_TOLERANCE", "MeasureVerdict", "measure_verdict"]
 
-#: Seconds the search and its proof may take by default.
-MEASURE_BUDGET_S = 20.0
 #: Pointwise relative residual |Σᵢ ∂(ρ fᵢ)/∂xᵢ| / Σᵢ |∂(ρ fᵢ)/∂xᵢ| accepted for ``found``.
 POINTWISE_TOLERANCE = 1e-12
 #: Nested brackets tried before the conditions are declared not to determine ∇ ln ρ.
@@ -295,17 +295,62 @@ def _gradient(data: LagrangianData, B: sp.Matrix, c: list[sp.Expr], points, floa
     return g, note
 
 
+def _rational_antiderivative(expr: sp.Expr, x: sp.Symbol) -> sp.Expr | None:
+    """∫ expr dx when expr is a rational function of x, or R(sin x) cos x, or R(cos x) sin x (R rational):
+    by :func:`sympy.integrals.rationaltools.ratint` (Hermite reduction and Lazard–Rioboo–Trager, a bounded algorithm), after the
+    substitution s = sin x or c = cos x; None for any other integrand."""
+    if expr.is_rational_function(x):
+        return ratint(sp.cancel(expr), x)
+    t = sp.Dummy("t")
+    for f, df in ((sp.sin(x), sp.cos(x)), (sp.cos(x), -sp.sin(x))):
+        candidate = sp.cancel(expr / df).subs(f, t)
+        if f == sp.sin(x):
+            candidate = candidate.subs(sp.cos(x) ** 2, 1 - t**2)
+        else:
+            candidate = candidate.subs(sp.sin(x) ** 2, 1 - t**2)
+        if not candidate.has(x) and candidate.is_rational_function(t):
+            return ratint(sp.cancel(candidate), t).subs(t, f)
+    return None
+
+
+def _antiderivative(expr: sp.Expr, x: sp.Symbol) -> sp.Expr:
+    """∫ expr dx by a bounded algorithm (:func:`_rational_antiderivative`), else by sympy's ``integrate``
+    (rule-based, ``manual``) when the integrand has at most :data:`MAX_INTEGRATE_OPS` operations: a limit on
+    the work, not a clock (sympy's heuristic integrators have no bound: Veselova's ln ρ part took minutes).
+
+    Raises
+    ------
+    _Failed
+        Not integrated (the reason names what was tried, or the limit).
+    """
+    found = _rational_antiderivative(expr, x)
+    if found is not None:
+        return found
+    why = over(operations(expr), MAX_INTEGRATE_OPS, "MAX_INTEGRATE_OPS", "sympy's integral")
+    if why is not None:
+        raise _Failed("undecided", f"grad ln rho is closed but its d/d{x} part is not a rational function of {x}, "
+                                   f"sin({x}) or cos({x}), and {why}")
+    term = sp.integrate(expr, x, manual=True)
+    if term.has(sp.Integral):
+        raise _Failed("undecided", f"grad ln rho is closed but its d/d{x} part could not be integrated")
+    return term
+
+
 def _integrate(data: LagrangianData, g: sp.Matrix, points) -> sp.Expr:
-    """φ with ∇φ = g (g closed), integrated coordinate by coordinate and checked."""
+    """φ with ∇φ = g (g closed), integrated coordinate by coordinate (:func:`_antiderivative`) and checked."""
     q = data.q
     phi = sp.Integer(0)
     for i, qi in enumerate(q):
         rest = tidy(g[i] - sp.diff(phi, qi))
         if rest != 0:
-            term = sp.integrate(rest, qi)
-            if term.has(sp.Integral):
-                raise _Failed("undecided", f"grad ln rho is closed but its d/d{qi} part could not be integrated")
-            phi += term
+            phi += _antiderivative(rest, qi)
+    point = sample_points(data)[0]  # log|f| for a log f negative there: the same gradient, a real density
+
+    def real_log(argument: sp.Expr) -> sp.Expr:
+        value = number(argument, point)
+        return sp.log(-argument) if value is not None and value < 0 else sp.log(argument)
+
+    phi = phi.replace(sp.log, real_log)
     for i, qi in enumerate(q):
         if _zero(sp.diff(phi, qi) - g[i], data, points) is not True:
             raise _Failed("undecided", f"ln rho integrated from its gradient does not reproduce d/d{qi}")
@@ -326,16 +371,13 @@ def _pointwise(data: LagrangianData, rho: sp.Expr, field: tuple[sp.Expr, ...], x
     return float(worst)
 
 
-def measure_verdict(data: LagrangianData, budget_s: float = MEASURE_BUDGET_S) -> MeasureVerdict:
+def measure_verdict(data: LagrangianData) -> MeasureVerdict:
     """Whether the reduced flow of ``data`` on its constraint manifold has an invariant measure ρ(q) dq du.
 
     Parameters
     ----------
     data : LagrangianData
         From :func:`nonholonomic.lagrangian.lagrangian_data` (parsed and checked).
-    budget_s : float
-        Seconds the search may take (:func:`nonholonomic.bounded.run`; past it the search goes on in the
-        background and a later call picks up its result).
 
     Returns
     -------
@@ -343,13 +385,13 @@ def measure_verdict(data: LagrangianData, budget_s: float = MEASURE_BUDGET_S) ->
         ``found`` only with the symbolic and pointwise proof; ``none`` only with an obstruction shown
         non-zero at the parameters' values; else ``undecided`` with the reason.
     """
-    if not derive(data).closed_form:
+    eqs = derive(data)
+    if not eqs.closed_form:
         return MeasureVerdict("undecided", None, (), (), "not searched: the equations of motion were eliminated "
-                              "without cancellation (too large for the exact elimination), so the divergence has "
-                              "no closed form to solve X_j ln rho = -c_j with")
-    outcome = bounded.run(("lagrangian.measure", data), _search, (data,), budget_s)
+                              f"without cancellation ({eqs.elimination}), so the divergence has no closed form to "
+                              "solve X_j ln rho = -c_j with")
+    outcome = bounded.run(("lagrangian.measure", data), _search, (data,))
     if outcome.status != "done":
-        reason = (f"sympy could not decide: {outcome.message}" if outcome.status == "error"
-                  else f"the search {outcome.message}")
-        return MeasureVerdict("undecided", None, (), (), reason, None, outcome.seconds)
+        return MeasureVerdict("undecided", None, (), (), f"sympy could not decide: {outcome.message}", None,
+                              outcome.seconds)
     return MeasureVerdict(*outcome.value)

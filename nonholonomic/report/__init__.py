@@ -14,6 +14,7 @@ import traceback
 from collections.abc import Callable
 from typing import Any
 
+from nonholonomic import bounded
 from nonholonomic.report import ball, others, veselova
 from nonholonomic.report.verdict import UNRESOLVED, VERDICTS, Check, Claim, Row
 
@@ -34,7 +35,13 @@ def paper_report(progress: Callable[[float], bool] | None = None,
 
     A claim whose check raises is reported ``unresolved`` with the error, so one broken check does
     not hide the others. ``progress(fraction)`` returning False stops early (the rows so far are
-    returned, ``complete`` False).
+    returned, ``complete`` False). Every verdict and detail is the same on every run; only the
+    ``seconds`` fields are timings.
+
+    Raises
+    ------
+    nonholonomic.bounded.SafetyCapExceeded
+        If a proof outlives the safety cap: a failure of the report, not a finding of a row.
     """
     start = time.perf_counter()
     builders = [fn for fn, name in zip(ROWS, claim_ids()) if only is None or name in only]
@@ -44,6 +51,8 @@ def paper_report(progress: Callable[[float], bool] | None = None,
         t0 = time.perf_counter()
         try:
             row = build()
+        except bounded.SafetyCapExceeded:  # the machine's limit, not the claim's: no row, the report fails
+            raise
         except Exception as exc:  # a broken check is a finding, not a crashed report
             row = Row(Claim("error", build.__doc__ or build.__name__, ""),
                       [Check(None, None, None, "error", f"{type(exc).__name__}: {exc}; "
@@ -63,7 +72,8 @@ def paper_report(progress: Callable[[float], bool] | None = None,
             "holds": "the form the core uses passes; no printed variant differs, or it passes too",
             "holds after correction": "the core's corrected form passes and the printed form fails the same check",
             "fails": "the core's form fails its check",
-            UNRESOLVED: "no check here decides the claim (budget, or not decidable from finite data)"},
+            UNRESOLVED: "no check here decides the claim (a proof past a deterministic work limit or sympy unable to "
+                        "reduce it, or not decidable from finite data)"},
     }
 
 

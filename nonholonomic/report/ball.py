@@ -21,7 +21,6 @@ from nonholonomic.kernels import parameter_vector
 from nonholonomic.report.common import (
     GAMMA0,
     INERTIA,
-    PROOF_BUDGET_S,
     A,
     D,
     evidence_check,
@@ -63,7 +62,7 @@ def bracket_2704_9() -> Row:
                   "the Jacobi identity for any S_bar(q)", "2704-9")
     q, p = sp.symbols("q1 q2", real=True), sp.symbols("p1 p2", real=True)
     S_bar = sp.Function("S_bar")(*q)
-    return Row(claim, [proof(*jacobi_symbolic(generalized_chaplygin_bracket(S_bar, q, p), PROOF_BUDGET_S))])
+    return Row(claim, [proof(*jacobi_symbolic(generalized_chaplygin_bracket(S_bar, q, p)))])
 
 
 @lru_cache(maxsize=1)
@@ -79,7 +78,7 @@ def _ball_theorem_1():
     values = {sym["I1"]: INERTIA[0], sym["I2"]: INERTIA[1], sym["I3"]: INERTIA[2], sym["D"]: D, sym["c"]: 0.35}
     shift = tuple(parse_expression(w, sym) for w in BALL_MONOPOLE_CHART["shift"])
     result = hamiltonize(parsed["lagrangian"], (sym["theta"], sym["phi"]), (sym["thetadot"], sym["phidot"]),
-                         parsed["a1"], parsed["a2"], parsed["b"], None, values, budget_s=PROOF_BUDGET_S,
+                         parsed["a1"], parsed["a2"], parsed["b"], None, values,
                          domain=((0.0, np.pi), (0.0, 2 * np.pi)), shift=shift, multiplier_symbol=sym["N"])
     return result, sym, values
 
@@ -111,12 +110,12 @@ def monopole() -> Row:
 
     result, sym, values = _ball_theorem_1()
     if result.monopole is None or result.S_bar is None:
-        return Row(claim, [Check(None, None, None, "numeric", "Theorem 1 gave no S_bar within the budget")])
+        return Row(claim, [Check(None, None, None, "numeric", f"Theorem 1 gave no S_bar: {result.reason}")])
     charge = result.monopole
     N = result.reducing_multiplier
     q = (sym["theta"], sym["phi"])
     zero = monopole_charge(result.S_bar, q, ((0.0, np.pi), (0.0, 2 * np.pi)), {**values, sym["c"]: 0.0},
-                           symbolic_budget_s=0)
+                           symbolic=False)
     rho_pole = float(ball.measure_density(sp.Matrix([0, 0, 1])).subs(BALL_VALUES))
     k = float(N.subs(values).subs({sym["theta"]: 0, sym["phi"]: 0})) / rho_pole
     expected = -4 * np.pi * 0.35 * k / np.sqrt(np.prod(INERTIA))
@@ -142,7 +141,7 @@ def measure() -> Row:
     claim = Claim(SECTION, "rho_mu = det(I_Q)^(-1/2) is an invariant density (Chaplygin)", "2604-3")
     result = run("chaplygin_ball", "linear", LINEAR, STATE)
     return Row(claim, [evidence_check(i) for i in measure_evidence(result.system, result.parameters,
-                                                                   result.trajectory.states, budget_s=PROOF_BUDGET_S)])
+                                                                   result.trajectory.states)])
 
 
 @claim_id("ball.F")
@@ -156,8 +155,8 @@ def bracket() -> Row:
     claim = Claim(SECTION, "The bracket (2604-6) satisfies the Jacobi identity for any J, D; its "
                   "Casimirs are gamma^2 and (L, gamma) / rho_mu", "2604-6")
     ps = chaplygin_ball_bracket()
-    checks = [proof(*jacobi_symbolic(ps, PROOF_BUDGET_S))]
-    checks += [proof(v, f"Casimir {name}: {detail}") for name, v, detail in casimir_checks(ps, PROOF_BUDGET_S)]
+    checks = [proof(*jacobi_symbolic(ps))]
+    checks += [proof(v, f"Casimir {name}: {detail}") for name, v, detail in casimir_checks(ps)]
     return Row(claim, checks)
 
 
@@ -173,7 +172,7 @@ def hamiltonian_form_row() -> Row:
     result = run("chaplygin_ball", "linear", LINEAR, STATE)
     res = flow_residual(form, system, result.trajectory.states, result.parameters)
     control = flow_residual(form, system, result.trajectory.states, result.parameters, time="t")
-    return Row(claim, [proof(*symbolic_flow_identity(form, system, PROOF_BUDGET_S)),
+    return Row(claim, [proof(*symbolic_flow_identity(form, system)),
                        Check.at_most(res, 1e-12, "pointwise", f"along t <= 100: {res:.2g}"),
                        Check(control > 1e-6, control, 1e-6, "pointwise",
                              f"control: in the original time t the same bracket misses the flow by {control:.3g}")])

@@ -17,7 +17,6 @@ from nonholonomic.integration import integrate
 from nonholonomic.kernels import parameter_vector, state_vector
 from nonholonomic.report.common import (
     INERTIA,
-    PROOF_BUDGET_S,
     D,
     evidence_check,
     example,
@@ -77,7 +76,7 @@ def veselova_ball_measure() -> Row:
     claim = Claim(VESELOVA_BALL, "The density (2704-5) is invariant", "2704-5")
     result = _example_run("chaplygin_ball_veselova")
     return Row(claim, [evidence_check(i) for i in measure_evidence(result.system, result.parameters,
-                                                                   result.trajectory.states, budget_s=PROOF_BUDGET_S)])
+                                                                   result.trajectory.states)])
 
 
 @claim_id("rubber_ball.veselova")
@@ -129,9 +128,8 @@ def quadric_measure() -> Row:
                   printed="the density read on the 4-dimensional phase space (rho = 1 there)",
                   corrected="|grad Phi| for d^3omega d^3x of the 6-dimensional ambient field", errata="ERRATA 13")
     result = _example_run("ball_on_quadric")
-    right = [evidence_check(i) for i in measure_evidence(result.system, result.parameters, result.trajectory.states,
-                                                         budget_s=PROOF_BUDGET_S)]
-    refuted, detail = symbolic_divergence_vanishes(result.system, sp.Integer(1), budget_s=PROOF_BUDGET_S)
+    right = [evidence_check(i) for i in measure_evidence(result.system, result.parameters, result.trajectory.states)]
+    refuted, detail = symbolic_divergence_vanishes(result.system, sp.Integer(1))
     return Row(claim, right, printed_check=proof(refuted, f"rho = 1: {detail}"))
 
 

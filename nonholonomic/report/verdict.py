@@ -7,8 +7,9 @@ Verdicts (computed, never typed in):
 * ``holds after correction``: the core's form passes and the printed form, checked the same way,
   fails;
 * ``fails``: the core's form fails its check;
-* ``unresolved``: the check could not decide (a symbolic budget ran out, or the claim is not
-  decidable by a check here, e.g. chaos).
+* ``unresolved``: the check could not decide (a proof past a deterministic work limit of
+  :mod:`nonholonomic.work_limits`, sympy unable to reduce it, or a claim not decidable by a check
+  here, e.g. chaos).
 """
 
 from __future__ import annotations

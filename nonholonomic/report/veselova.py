@@ -20,7 +20,6 @@ from nonholonomic.report.common import (
     GAMMA0,
     INERTIA,
     OMEGA0,
-    PROOF_BUDGET_S,
     A,
     evidence_check,
     integrals_check,
@@ -71,7 +70,7 @@ def measure() -> Row:
     claim = Claim(SECTION, "rho_omega = (gamma, I^-1 gamma)^(1/2) is an invariant density",
                   "2504-4")
     result = run("veselova", "linear", LINEAR, STATE)
-    items = measure_evidence(result.system, result.parameters, result.trajectory.states, budget_s=PROOF_BUDGET_S)
+    items = measure_evidence(result.system, result.parameters, result.trajectory.states)
     return Row(claim, [evidence_check(i) for i in items])
 
 
@@ -161,7 +160,7 @@ def _e3_form_rows() -> tuple[Check, Check]:
     assert form is not None
     result = run("veselova", "linear", LINEAR, STATE)
     X, p = result.trajectory.states, result.parameters
-    proven, detail = symbolic_flow_identity(form, system, PROOF_BUDGET_S)
+    proven, detail = symbolic_flow_identity(form, system)
     res = flow_residual(form, system, X, p)
     return proof(proven, detail), Check.at_most(res, 1e-12, "pointwise",
                                                 f"max |pushforward / N - {{H, x}}| / max |{{H, x}}| along t <= 100: {res:.2g}")

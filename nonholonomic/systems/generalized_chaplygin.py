@@ -49,8 +49,6 @@ from nonholonomic.refusals import RefusedField
 
 KIND = "generalized_chaplygin"
 TITLE = "Generalized Chaplygin system with two degrees of freedom, written by the user"
-#: Seconds Theorem 1's symbolic steps may take when a job's system is defined.
-THEOREM_1_BUDGET_S = 20.0
 #: Names a coordinate, velocity or parameter may not take.
 RESERVED = frozenset({"t", "tau", "N", "q", "qdot"})
 #: The expression fields, in the order they are parsed.
@@ -216,8 +214,7 @@ def theorem_1(data: ChaplyginData) -> tuple[Any, str]:
     from nonholonomic.hamiltonization import HamiltonianForm
     from nonholonomic.reducing_multiplier import hamiltonize
 
-    result = hamiltonize(data.L, data.q, data.v, data.a1, data.a2, data.b, potential=data.U,
-                         budget_s=THEOREM_1_BUDGET_S)
+    result = hamiltonize(data.L, data.q, data.v, data.a1, data.a2, data.b, potential=data.U)
     N = result.reducing_multiplier
     if N is None:
         return None, result.reason or "Theorem 1 gives no reducing multiplier"
@@ -257,8 +254,10 @@ def theorem_1(data: ChaplyginData) -> tuple[Any, str]:
 def define(data: ChaplyginData, reduce: bool = True) -> MechanicalSystem:
     """The user's system as a :class:`MechanicalSystem` in the state (q, q̇).
 
-    ``reduce`` runs Theorem 1 (up to :data:`THEOREM_1_BUDGET_S`): the measure, the time τ and the
-    Hamiltonian form; without it (the API's validation) they are left to the job.
+    ``reduce`` runs Theorem 1 (every step to its end, within the deterministic limits of
+    :mod:`nonholonomic.work_limits`, so the same data give the same definition everywhere): the
+    measure, the time τ and the Hamiltonian form; without it (the API's validation) they are left to
+    the job.
     """
     L = data.L - data.U
     q, v = data.q, data.v

@@ -34,6 +34,7 @@ Jobs integrate autonomous systems: an L or a constraint with the time t explicit
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import lru_cache
 from typing import Any
 
@@ -50,13 +51,14 @@ from nonholonomic.definition import (
 )
 from nonholonomic.lagrangian import DataError, LagrangianData, derive
 from nonholonomic.lagrangian.checks import number, sample_points
+from nonholonomic.lagrangian.equations import energy_of, plain_field
 from nonholonomic.lagrangian.hamiltonization import hamiltonization
 from nonholonomic.lagrangian.integrals import integral_search
 from nonholonomic.lagrangian.measure import measure_verdict
 from nonholonomic.lagrangian.parse import KIND, MAX_COORDINATES
 from nonholonomic.memo import remembered
 
-__all__ = ["CONSTRAINT_TOLERANCE", "EXAMPLE", "EXAMPLE_JOB", "KIND", "MAX_COORDINATES", "TITLE", "define"]
+__all__ = ["CONSTRAINT_TOLERANCE", "EXAMPLE", "EXAMPLE_JOB", "KIND", "MAX_COORDINATES", "TITLE", "define", "outline"]
 
 TITLE = "Lagrangian system with constraints linear in the velocities, written by the user"
 #: The equations' source, for the results.
@@ -65,6 +67,9 @@ EQUATION = "Lagrange-d'Alembert"
 CONSTRAINT_TOLERANCE = 1e-10
 #: Why no invariant measure is claimed before the search ran (the request's validation).
 NO_MEASURE = "none claimed yet: the invariant-measure search runs with the job"
+#: What an outline (a request's validation) says of its equations.
+OUTLINE = ("the equations of motion are derived with the job: a request is checked against the plain elimination's "
+           "field (the same field, not simplified)")
 #: Why a definition shared by a parameter sweep claims less.
 GENERIC = ("an ensemble sweeping a parameter shares one definition: only what holds for every value of the "
            "parameters is claimed (the ansatz's integrals and anything found only at the parameters' values are not)")
@@ -72,7 +77,8 @@ GENERIC = ("an ensemble sweeping a parameter shares one definition: only what ho
 MEASURE_SEARCH = ("sought with the job on the constraint manifold, as rho(q) dq du (u the independent velocities): "
                   "found (the density, proven symbolically and checked pointwise, then claimed and checked along "
                   "the trajectory as rho |det A_D| in (q, q_dot)), none (an obstruction proven at the parameters' "
-                  "values) or undecided (within the budget); result.system.structure.measure says which and why")
+                  "values) or undecided (a deterministic limit on the search's work, named in the reason); "
+                  "result.system.structure.measure says which and why")
 
 #: Chaplygin's sleigh: a knife edge at distance a from the centre of mass, in the plane.
 EXAMPLE: dict[str, Any] = {
@@ -162,8 +168,8 @@ def define(data: LagrangianData, reduce: bool = True, generic: bool = False) -> 
     data : LagrangianData
         From :func:`nonholonomic.lagrangian.lagrangian_data` (parsed and checked).
     reduce : bool
-        Run the structure search (the invariant measure on the constraint manifold, within its budget); without
-        it (a request's validation) no measure is claimed.
+        Run the structure searches (the invariant measure on the constraint manifold, the integrals, Theorem 1;
+        each bounded by deterministic limits on its work, never by a clock); without it no measure is claimed.
     generic : bool
         Claim only what holds for every value of the parameters (an ensemble sweeping one shares this
         definition): not the ansatz's integrals, which are sought at the parameters' values, nor a measure
@@ -180,15 +186,39 @@ def define(data: LagrangianData, reduce: bool = True, generic: bool = False) -> 
     DataError
         ``L`` or ``constraints[i]`` with the time t explicitly.
     DerivationError
-        The symbolic derivation past its budget (:data:`nonholonomic.lagrangian.equations.DERIVATION_BUDGET_S`).
+        Sympy failed on the derivation.
+    nonholonomic.bounded.SafetyCapExceeded
+        A symbolic step still running after the safety cap (a failure of the job, not a verdict).
     """
     _autonomous(data)
-    eqs = derive(data)
+    return _assemble(data, derive(data).qddot, reduce, generic)
+
+
+@lru_cache(maxsize=64)
+def outline(data: LagrangianData) -> MechanicalSystem:
+    """What a request for ``data`` is checked against, in milliseconds: every name, integral and constraint
+    of :func:`define` (without ``reduce``), the field by :func:`~nonholonomic.lagrangian.equations.plain_field`
+    (the same field, not simplified: never compiled on the request path). The derivation, the elimination
+    and the structure searches run with the job.
+
+    Raises
+    ------
+    DataError
+        ``L`` or ``constraints[i]`` with the time t explicitly.
+    """
+    _autonomous(data)
+    system = _assemble(data, plain_field(data), reduce=False, generic=False)
+    return replace(system, structure={"equations": OUTLINE})
+
+
+def _assemble(data: LagrangianData, rhs: tuple[sp.Expr, ...], reduce: bool, generic: bool) -> MechanicalSystem:
+    """The :class:`MechanicalSystem` of ``data`` with the field ``rhs`` (q̈), the structure searched if ``reduce``."""
     q, v, L = data.q, data.v, data.L
     texts = dict(data.texts)
     half = sp.expand(sum((vi * sp.diff(L, vi) for vi in v), sp.Integer(0)) / 2)  # T₂ + T₁/2: the size of E's terms
-    assert eqs.energy is not None  # L has no t (checked above)
-    integrals = [FirstIntegral("energy", eqs.energy, sp.Abs(half) + sp.Abs(L - half), "E = (q_dot, dL/dq_dot) - L",
+    energy = energy_of(data)
+    assert energy is not None  # L has no t (checked by the callers)
+    integrals = [FirstIntegral("energy", energy, sp.Abs(half) + sp.Abs(L - half), "E = (q_dot, dL/dq_dot) - L",
                                EQUATION)]
     constraints = []
     for i, (f, projection) in enumerate(zip(data.constraints, _projections(data))):
@@ -224,7 +254,7 @@ def define(data: LagrangianData, reduce: bool = True, generic: bool = False) -> 
                          for s in data.parameters),
         state=(StateVector("q", q, f"generalized coordinates ({', '.join(map(str, q))})", "as L's coordinates"),
                StateVector("q_dot", v, f"generalized velocities ({', '.join(map(str, v))})", "q's unit/s")),
-        rhs=eqs.rhs,
+        rhs=(*v, *rhs),
         integrals=tuple(integrals),
         measure=measure,
         reduced_time=reduced_time,

@@ -46,8 +46,8 @@ def _record(request: Request, ensemble_id: str) -> dict[str, Any]:
                                           429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND + POOL_FULL}),
              summary="Submit an ensemble (members from a list, a level set or a parameter sweep)")
 async def submit_ensemble(body: EnsembleRequest, request: Request) -> JSONResponse:
-    """Every member is validated before anything is queued (expressions within ``validation_budget_s``, off
-    the event loop); then the chunks go to the workers."""
+    """Every member is validated before anything is queued (expressions by deterministic size measures, then
+    read off the event loop); then the chunks go to the workers."""
     chunks = await validated(request, "ensemble", body)
     assert chunks is not None
     if body.members.grid is not None and body.members.grid.ranges is None:  # resolved once, kept with the request

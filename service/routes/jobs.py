@@ -66,8 +66,8 @@ def _view(record: JobRecord, trajectory: bool = True) -> dict[str, Any]:
                                           429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND + POOL_FULL}),
              summary="Submit a simulation job")
 async def submit_job(job: JobRequest, request: Request) -> JSONResponse:
-    """Validate (shape, ranges, |γ| = 1, state names; expressions within ``validation_budget_s``, off the
-    event loop) and queue; nothing is queued if invalid. With an ``Idempotency-Key`` a retry answers the
+    """Validate (shape, ranges, |γ| = 1, state names; expressions by deterministic size measures, then read
+    off the event loop) and queue; nothing is queued if invalid. With an ``Idempotency-Key`` a retry answers the
     first response again."""
     await validated(request, "job", job)
     body = job.model_dump(mode="json")

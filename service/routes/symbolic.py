@@ -1,13 +1,24 @@
 """Symbolic work for user-given systems: ``POST /v1/brackets/verify`` and ``POST /v1/hamiltonize``.
 
-User strings go through the safe parser only (:mod:`nonholonomic.expressions`). Every symbolic step
-runs under the request's time budget; parse errors are 422 problems naming the field and position.
+User strings go through the safe parser only (:mod:`nonholonomic.expressions`); parse errors are 422
+problems naming the field and position. Every symbolic step runs to its end within the request's
+deterministic work limits (``limits``, :mod:`nonholonomic.work_limits`: sympy operation counts), so the
+same body gets the same answer on every machine and at any load, and every answer is remembered
+(:mod:`workers.disk_memo`). ``budget_s`` is deprecated and ignored: the answer's ``deprecations`` says so.
+
+The clock is only the machine's safety cap (:func:`safety_cap_s`, from the environment variable
+``NONHOLONOMIC_SYMBOLIC_REQUEST_SAFETY_CAP_S``, default :data:`DEFAULT_SAFETY_CAP_S`): a symbolic step still
+running past it in the child process (:class:`nonholonomic.bounded.SafetyCapExceeded`), or a child still
+running past it plus :data:`service.isolated.GRACE_S`, is a 503 with ``Retry-After``: a failure of the
+machine, never a verdict on the question, and never a 422.
 """
 
 from __future__ import annotations
 
 import ast
-import time
+import logging
+import math
+import os
 from collections.abc import Sequence
 from typing import Any
 
@@ -15,9 +26,10 @@ import sympy as sp
 from fastapi import APIRouter, Request, Response
 from starlette.concurrency import run_in_threadpool
 
-from schemas.problems import TIMEOUT, FieldError
+from schemas.problems import OVERLOADED, FieldError
 from schemas.settings import Settings, get_settings
 from schemas.symbolic import (
+    BUDGET_S_DEPRECATED,
     BracketVerifyRequest,
     BracketVerifyResult,
     HamiltonizeExamples,
@@ -27,12 +39,17 @@ from schemas.symbolic import (
 from service.errors import INVALID, ProblemError, invalid_request, problem_responses
 from service.openapi import operation_id
 
+log = logging.getLogger(__name__)
 router = APIRouter(tags=["symbolic"], generate_unique_id_function=operation_id)
+#: The environment variable of the symbolic routes' safety cap (seconds, > 0).
+SAFETY_CAP_ENV = "NONHOLONOMIC_SYMBOLIC_REQUEST_SAFETY_CAP_S"
+#: Seconds a symbolic request's child process may work when :data:`SAFETY_CAP_ENV` is not set.
+DEFAULT_SAFETY_CAP_S = 120.0
 #: The problems of the two symbolic routes.
 _ERRORS = problem_responses({
-    408: "the symbolic work is still running at budget_s + 10 s; it was stopped",
     422: INVALID + " (parse errors name the field and position; too many expressions or characters)",
-    503: "the symbolic pool and its wait queue are full; `Retry-After` says when to retry"})
+    503: "the symbolic pool and its wait queue are full, or the symbolic work outlived the machine's safety cap "
+         f"({SAFETY_CAP_ENV}, default {DEFAULT_SAFETY_CAP_S:g} s: not a verdict); `Retry-After` says when to retry"})
 
 
 class FieldProblem(ValueError):
@@ -43,19 +60,25 @@ class FieldProblem(ValueError):
         self.field, self.reason = field, reason
 
 
-class _Deadline:
-    """The request's budget, counted from the child's start: parsing and every symbolic step within it."""
+class SafetyCapped(RuntimeError):
+    """A symbolic step outlived the safety cap in the child (picklable form of
+    :class:`nonholonomic.bounded.SafetyCapExceeded`): answered as a 503."""
 
-    def __init__(self, budget_s: float) -> None:
-        self.budget_s, self._end = budget_s, time.monotonic() + budget_s
 
-    def remaining(self, field: str) -> float:
-        """Seconds left; past the budget a problem naming ``budget_s`` and where the work stopped."""
-        left = self._end - time.monotonic()
-        if left <= 0:
-            raise FieldProblem("budget_s", f"reading the expressions used the whole budget ({self.budget_s:g} s; "
-                                           f"stopped at {field}): shorten them or raise budget_s")
-        return left
+def safety_cap_s() -> float:
+    """Seconds a symbolic request may work: :data:`SAFETY_CAP_ENV` if it holds a positive number, else
+    :data:`DEFAULT_SAFETY_CAP_S` (read per request)."""
+    raw = os.environ.get(SAFETY_CAP_ENV, "").strip()
+    if not raw:
+        return DEFAULT_SAFETY_CAP_S
+    try:
+        value = float(raw)
+    except ValueError:
+        value = float("nan")
+    if not (math.isfinite(value) and value > 0):
+        log.warning("%s=%r is not a positive number of seconds: using %g s", SAFETY_CAP_ENV, raw, DEFAULT_SAFETY_CAP_S)
+        return DEFAULT_SAFETY_CAP_S
+    return value
 
 
 def _declare(names: Sequence[str], field: str) -> dict[str, sp.Symbol]:
@@ -67,13 +90,11 @@ def _declare(names: Sequence[str], field: str) -> dict[str, sp.Symbol]:
         raise FieldProblem(field, exc.reason) from None
 
 
-def _parse(text: str, symbols: dict[str, sp.Symbol], field: str, deadline: _Deadline | None = None) -> sp.Expr:
+def _parse(text: str, symbols: dict[str, sp.Symbol], field: str) -> sp.Expr:
     """``text`` parsed, with a first derivative that is a function: every field is differentiated (the
     Jacobi identity, Casimirs, Theorem 1), and sign's derivative, a Dirac delta, cannot be evaluated."""
     from nonholonomic.expressions import ExpressionError, differentiable, parse_expression
 
-    if deadline is not None:
-        deadline.remaining(field)
     try:
         return differentiable(parse_expression(text, symbols), "the checks differentiate it", order=1)
     except ExpressionError as exc:
@@ -112,66 +133,87 @@ def _check_size(request: BracketVerifyRequest | HamiltonizeRequest, settings: Se
         raise invalid_request(errors)
 
 
-#: RFC 9211's ``Cache-Status`` of a symbolic answer: read back, or computed (and stored when decided).
+def _deprecations(request: BracketVerifyRequest | HamiltonizeRequest) -> list[str]:
+    """Notes on the deprecated fields the request sent (``budget_s``)."""
+    return [BUDGET_S_DEPRECATED] if "budget_s" in request.model_fields_set else []
+
+
+#: RFC 9211's ``Cache-Status`` of a symbolic answer: read back, or computed and stored.
 CACHE_HIT, CACHE_MISS = "nonholonomic; hit", "nonholonomic; fwd=miss"
 
 
-async def _run(http: Request, fn: Any, payload: dict[str, Any], budget_s: float, response: Response) -> Any:
+async def _run(http: Request, fn: Any, request: BracketVerifyRequest | HamiltonizeRequest,
+               response: Response) -> Any:
     """``fn(payload)`` in a child process (:mod:`service.isolated`), holding a slot of the symbolic pool
-    (:mod:`service.admission`); the child's problems become 422s, a child past its limit a 408. An
-    answer decided within its budget is remembered (:mod:`workers.disk_memo`): the same body is then
-    answered at once."""
+    (:mod:`service.admission`); the child's problems become 422s, work past the safety cap a 503. Every
+    answer is deterministic (work limits, no clock), so every answer is remembered
+    (:mod:`workers.disk_memo`): the same body is then answered at once."""
     from nonholonomic import memo
     from service.isolated import GRACE_S, IsolatedTimeout, run_isolated
-    from workers.disk_memo import deterministic, response_fingerprint
+    from workers.disk_memo import response_fingerprint
 
-    # the same body, the same code and libraries: the same answer, remembered unless a budget cut it short
-    key = (memo.key_of("symbolic-response", (fn.__name__, payload, response_fingerprint()))
+    payload = request.model_dump()
+    deprecations = _deprecations(request)
+    # the same body (budget_s aside: it decides nothing), the same code and libraries: the same answer
+    same = ({k: v for k, v in payload.items() if k != "budget_s"}, deprecations)
+    key = (memo.key_of("symbolic-response", (fn.__name__, same, response_fingerprint()))
            if memo.installed() else None)
     if key is not None:
         found, answer = await run_in_threadpool(memo.recall, key)
         if found:
             response.headers["Cache-Status"] = CACHE_HIT
             return answer
-    async with http.app.state.symbolic_pool.slot():
+    cap = safety_cap_s()
+    pool = http.app.state.symbolic_pool
+    async with pool.slot():
         try:
-            answer, cut = await run_in_threadpool(run_isolated, _counting_cuts, (fn, payload), budget_s + GRACE_S)
-            stored = key is not None and cut == 0 and deterministic(answer)
-            if stored:
-                await run_in_threadpool(memo.keep, key, answer)
-            response.headers["Cache-Status"] = CACHE_MISS + ("; stored" if stored else "")
-            return answer
+            answer = await run_in_threadpool(run_isolated, _in_child, (fn, payload, cap), cap + GRACE_S)
         except FieldProblem as exc:
             raise invalid_request([FieldError(field=exc.field, reason=exc.reason)]) from None
-        except IsolatedTimeout as exc:
-            raise ProblemError(408, "Symbolic work timed out",
-                               f"{exc}; lower the expressions' size or raise budget_s", TIMEOUT) from None
+        except (IsolatedTimeout, SafetyCapped) as exc:
+            retry = max(pool.retry_after_s(), math.ceil(cap))
+            raise ProblemError(
+                503, "Symbolic work past the safety cap",
+                f"{exc}. This is the machine's safety cap ({cap:g} s, {SAFETY_CAP_ENV}), not a verdict on the "
+                f"question: the machine may be overloaded; retry after {retry} s (the same body gets the same "
+                "answer), or lower `limits` to try less", OVERLOADED, headers={"Retry-After": str(retry)}) from None
+    answer = {**answer, "deprecations": deprecations}
+    if key is not None:
+        await run_in_threadpool(memo.keep, key, answer)
+    response.headers["Cache-Status"] = CACHE_MISS + ("; stored" if key is not None else "")
+    return answer
 
 
-def _counting_cuts(fn: Any, payload: dict[str, Any]) -> tuple[Any, int]:
-    """``fn(payload)`` in the child, and how many of its computations a budget left undone
-    (:func:`nonholonomic.bounded.cut_short_count`): only an answer with none is remembered."""
+def _in_child(fn: Any, payload: dict[str, Any], cap: float) -> Any:
+    """``fn(payload)`` in the child, every symbolic step waited for at most ``cap`` seconds
+    (:func:`nonholonomic.bounded.set_safety_cap`); a step past it is :class:`SafetyCapped`."""
     from nonholonomic import bounded
 
-    before = bounded.cut_short_count()
-    answer = fn(payload)
-    return answer, bounded.cut_short_count() - before
+    bounded.set_safety_cap(cap)
+    try:
+        return fn(payload)
+    except bounded.SafetyCapExceeded as exc:
+        raise SafetyCapped(str(exc)) from None
+
+
+def _limits(request: BracketVerifyRequest | HamiltonizeRequest) -> Any:
+    from nonholonomic import work_limits
+
+    return work_limits.DEFAULT if request.limits is None else request.limits.to_core()
 
 
 def _verify_in_child(payload: dict[str, Any]) -> dict[str, Any]:
-    """The bracket checks of a request (runs in the child: parsing counts against the budget)."""
+    """The bracket checks of a request (runs in the child)."""
     from nonholonomic.evidence.brackets import verify_user_bracket
 
     request = BracketVerifyRequest.model_validate(payload)
-    deadline = _Deadline(request.budget_s)
     symbols = _declare(request.variables + list(request.parameters) + request.symbols, "variables")
-    matrix = sp.Matrix([[_parse(entry, symbols, f"matrix[{i}][{j}]", deadline) for j, entry in enumerate(row)]
+    matrix = sp.Matrix([[_parse(entry, symbols, f"matrix[{i}][{j}]") for j, entry in enumerate(row)]
                         for i, row in enumerate(request.matrix)])
-    casimirs = {name: _parse(text, symbols, f"casimirs.{name}", deadline) for name, text in request.casimirs.items()}
+    casimirs = {name: _parse(text, symbols, f"casimirs.{name}") for name, text in request.casimirs.items()}
     try:
         report = verify_user_bracket([symbols[v] for v in request.variables], matrix, casimirs,
-                                     {symbols[k]: v for k, v in request.parameters.items()},
-                                     deadline.remaining("budget_s"))
+                                     {symbols[k]: v for k, v in request.parameters.items()}, limits=_limits(request))
     except FieldProblem:
         raise
     except ValueError as exc:
@@ -184,27 +226,23 @@ def _verify_in_child(payload: dict[str, Any]) -> dict[str, Any]:
              summary="Jacobi identity, Casimirs and rank of a user-given bracket")
 async def verify_bracket(request: BracketVerifyRequest, http: Request, response: Response) -> dict[str, Any]:
     _check_size(request, get_settings())
-    return await _run(http, _verify_in_child, request.model_dump(),  # type: ignore[no-any-return]
-                      request.budget_s, response)
+    return await _run(http, _verify_in_child, request, response)  # type: ignore[no-any-return]
 
 
 def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
-    """Theorem 1 for a user's system, as JSON (runs in the child: parsing counts against the budget)."""
+    """Theorem 1 for a user's system, as JSON (runs in the child)."""
     from nonholonomic.reducing_multiplier import hamiltonize as reduce
 
     request = HamiltonizeRequest.model_validate(payload)
-    deadline = _Deadline(request.budget_s)
     names = request.coordinates + request.velocities + list(request.parameters) + request.symbols
     symbols = _declare(names, "coordinates")
-    parsed = {field: _parse(getattr(request, field), symbols, field, deadline)
-              for field in ("lagrangian", "a1", "a2", "b")}
-    potential = None if request.potential is None else _parse(request.potential, symbols, "potential", deadline)
+    parsed = {field: _parse(getattr(request, field), symbols, field) for field in ("lagrangian", "a1", "a2", "b")}
+    potential = None if request.potential is None else _parse(request.potential, symbols, "potential")
     domain, shift, multiplier = _monopole(request, symbols)
     args = (parsed["lagrangian"], tuple(symbols[q] for q in request.coordinates),
             tuple(symbols[v] for v in request.velocities), parsed["a1"], parsed["a2"], parsed["b"], potential,
             {symbols[k]: v for k, v in request.parameters.items()})
-    kwargs = {"budget_s": deadline.remaining("budget_s"), "domain": domain, "shift": shift,
-              "multiplier_symbol": multiplier}
+    kwargs = {"domain": domain, "shift": shift, "multiplier_symbol": multiplier, "limits": _limits(request)}
     try:
         return reduce(*args, **kwargs).to_json()
     except FieldProblem:
@@ -218,8 +256,7 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
              summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
 async def hamiltonize(request: HamiltonizeRequest, http: Request, response: Response) -> dict[str, Any]:
     _check_size(request, get_settings())
-    return await _run(http, _hamiltonize_in_child, request.model_dump(),  # type: ignore[no-any-return]
-                      request.budget_s, response)
+    return await _run(http, _hamiltonize_in_child, request, response)  # type: ignore[no-any-return]
 
 
 #: The name standing for the reducing multiplier N in ``monopole.shift``.

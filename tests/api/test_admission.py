@@ -21,6 +21,21 @@ from tests.api.conftest import BALL, STATE, job
 A, B = {"X-API-Key": "alpha-secret"}, {"X-API-Key": "beta-secret"}
 #: A job that runs for minutes: it keeps the one embedded thread while the others wait in its queue.
 LONG = job(t_final=1e8, samples=2)
+#: Hang guard (seconds) of each wait for a job's status: far above the few seconds a quiet machine needs
+#: (the first job compiles its integrator), never a result.
+GUARD_S = 300.0
+#: The lease of the renewed claim below: renewed every third of it, so a renewal may come up to two thirds
+#: of it late (a loaded machine) and the claim still holds.
+RENEWED_LEASE_S = 1.0
+
+
+def _until_status(client: TestClient, location: str, status: str) -> None:
+    """Wait until the work at ``location`` (alice's) has ``status``; fail past the hang guard."""
+    deadline = time.monotonic() + GUARD_S
+    while (seen := client.get(location, headers=A).json()["status"]) != status:
+        if time.monotonic() > deadline:
+            pytest.fail(f"hang guard: {location} still {seen!r}, not {status!r}, after {GUARD_S:g} s")
+        time.sleep(0.01)
 
 
 def ensemble(members: int, chunk_size: int | None = 1, sample: bool = False) -> dict:
@@ -57,9 +72,7 @@ def app_with(monkeypatch) -> Iterator:
 def test_an_ensemble_counts_its_chunks_against_the_queue_bound(app_with):
     client = app_with(MAX_QUEUED_MESSAGES="5", API_KEYS="alice:alpha-secret")
     first = client.post("/v1/jobs", json=LONG, headers=A).headers["location"]
-    deadline = time.monotonic() + 60  # hang guard: the one thread takes it, nothing waits
-    while client.get(first, headers=A).json()["status"] != "running" and time.monotonic() < deadline:
-        time.sleep(0.01)
+    _until_status(client, first, "running")  # the one thread takes it, nothing waits
     assert [client.post("/v1/jobs", json=LONG, headers=A).status_code for _ in range(3)] == [202] * 3  # 3 wait
     r = client.post("/v1/ensembles", json=ensemble(3), headers=A)  # 3 + 3 > 5
     assert r.status_code == 429 and r.json()["type"] == "/problems/queue-full", r.text
@@ -118,9 +131,7 @@ def test_failed_authentication_is_rate_limited_per_address(app_with):
 
 def _finished(client: TestClient, location: str) -> None:
     """Wait for the work at ``location`` (alice's): no writes in the background while counting."""
-    deadline = time.monotonic() + 120
-    while client.get(location, headers=A).json()["status"] != "succeeded" and time.monotonic() < deadline:
-        time.sleep(0.05)
+    _until_status(client, location, "succeeded")
 
 
 def _asked_by_bob(client: TestClient, foreign: str, unknown: str) -> tuple[dict, dict]:
@@ -175,15 +186,15 @@ def test_an_idempotency_key_in_progress_is_free_again_after_its_lease_unless_ren
     assert store.claim("alice:k", "f", "t1", lease_s=0.2) is None
     assert store.claim("alice:k", "f", "t2", lease_s=0.2)["response"] is None  # in progress: a 409
     time.sleep(0.3)  # nobody renewed it (its API died)
-    assert store.claim("alice:k", "f", "t3", lease_s=0.2) is None  # free again: t3's now
-    store.leases.hold("alice:k", "t3", 0.2)  # served longer than its lease: renewed
+    assert store.claim("alice:k", "f", "t3", lease_s=RENEWED_LEASE_S) is None  # free again: t3's now
+    store.leases.hold("alice:k", "t3", RENEWED_LEASE_S)  # served longer than its lease: renewed
     try:
-        time.sleep(0.6)
+        time.sleep(1.5 * RENEWED_LEASE_S)
         assert store.claim("alice:k", "f", "t4", lease_s=0.2) is not None
     finally:
         store.leases.drop("t3")
     store.release("alice:k", "t4")  # not t4's claim: nothing freed
     assert store.claim("alice:k", "f", "t5", lease_s=0.2) is not None
     store.complete("alice:k", "f", {"content": {}, "headers": {}})
-    time.sleep(0.3)
+    time.sleep(RENEWED_LEASE_S + 0.1)  # past the lease it had
     assert store.claim("alice:k", "f", "t6", lease_s=0.2)["response"] is not None  # an answer keeps the long TTL

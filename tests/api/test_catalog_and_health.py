@@ -2,6 +2,22 @@
 
 from __future__ import annotations
 
+#: Hang guard (seconds) of each wait for /health to change: far above the fraction of a second the
+#: monitor needs (a check every 0.25 s), never a result.
+GUARD_S = 60.0
+
+
+def _health_until(client, status: int):
+    """GET /health until it answers ``status`` (returned); fail past the hang guard."""
+    import threading
+    import time
+
+    deadline = time.monotonic() + GUARD_S
+    while (r := client.get("/health")).status_code != status:
+        assert time.monotonic() < deadline, f"hang guard: /health not {status} within {GUARD_S:g} s: {r.text}"
+        threading.Event().wait(0.02)
+    return r
+
 
 def test_health_in_embedded_mode(client):
     r = client.get("/health")
@@ -22,7 +38,7 @@ def test_embedded_health_is_503_until_the_warm_up_ends(monkeypatch):
     from service.main import create_app
 
     release = threading.Event()
-    monkeypatch.setattr(embedded, "warm_up", lambda state=None: release.wait(30))
+    monkeypatch.setattr(embedded, "warm_up", lambda state=None: release.wait(GUARD_S))
     monkeypatch.delenv("REDIS_URL", raising=False)
     monkeypatch.setenv("NONHOLONOMIC_WARM_UP", "true")
     get_settings.cache_clear()
@@ -32,12 +48,8 @@ def test_embedded_health_is_503_until_the_warm_up_ends(monkeypatch):
             assert r.status_code == 503 and r.json()["status"] == "degraded"
             assert r.json()["workers"]["warm"] is False and "warm-up" in r.json()["detail"]
             release.set()
-            for _ in range(100):
-                if client.get("/health").status_code == 200:
-                    break
-                threading.Event().wait(0.02)
-            r = client.get("/health")
-            assert r.status_code == 200 and r.json()["workers"]["warm"] is True and "detail" not in r.json()
+            r = _health_until(client, 200)
+            assert r.json()["workers"]["warm"] is True and "detail" not in r.json()
     finally:
         release.set()
         get_settings.cache_clear()
@@ -131,12 +143,8 @@ def test_health_answers_from_the_monitor_when_the_check_is_late(client):
     assert max(ages) > 0  # answered from a check that began before the request
     flip["parts"] = {"ok": False, "mode": "embedded", "broker": "none (embedded)", "store": "unreachable",
                      "workers": {"threads": 1, "warm": True}, "detail": "the job store cannot be reached"}
-    for _ in range(200):  # hang guard only: the monitor's next check reports it
-        r = client.get("/health")
-        if r.status_code == 503:
-            break
-        threading.Event().wait(0.05)
-    assert r.status_code == 503 and r.json()["store"] == "unreachable", r.text
+    r = _health_until(client, 503)  # the monitor's next check reports it
+    assert r.json()["store"] == "unreachable", r.text
 
 
 def test_health_says_503_when_no_check_answers(client):
@@ -147,14 +155,10 @@ def test_health_says_503_when_no_check_answers(client):
 
     hang = threading.Event()
     backend = client.app.state.backend
-    backend.health = lambda: hang.wait(30) and {}
+    backend.health = lambda: hang.wait(2 * GUARD_S) and {}
     try:
-        for _ in range(200):  # hang guard only
-            r = client.get("/health")
-            if r.status_code == 503:
-                break
-            threading.Event().wait(0.05)
-        assert r.status_code == 503 and r.json()["store"] == "unknown", r.text
+        r = _health_until(client, 503)  # once the latest check is older than STALE_S
+        assert r.json()["store"] == "unknown", r.text
         assert f"{health.STALE_S:g} s" in r.json()["detail"]
     finally:
         hang.set()

@@ -24,7 +24,7 @@ PARTICLE_Q, PARTICLE_V = [0.3, -0.2, 0.1], [0.5, 0.4, -0.2 * 0.5]  # z_dot = y x
 def _run(client, body) -> tuple[str, dict]:
     r = client.post("/v1/jobs", json=body)
     assert r.status_code == 202, r.text
-    view = poll_job(client, r.headers["location"], timeout=120.0)
+    view = poll_job(client, r.headers["location"], timeout=600.0)
     assert view["status"] == "succeeded", view["error"]
     return r.headers["location"], view["result"]
 
@@ -141,22 +141,21 @@ def test_the_catalog_serves_the_lagrangian_entry(client):
     assert client.post("/v1/jobs", json=body).status_code == 202
 
 
-def test_a_derivation_past_its_budget_is_a_problem_naming_L_not_a_500(monkeypatch):
-    """The API's validation (in a child, under validation_budget_s: a 422 there) and the worker (no timer: a
-    failed job) both read :class:`DerivationError` as a problem of ``system.L``."""
+def test_a_derivation_sympy_fails_on_is_the_jobs_failure_not_a_refusal_nor_a_500(monkeypatch):
+    """The request path only parses and outlines the system (no derivation: the same answer at any load);
+    the derivation runs with the job, and sympy's failure there fails the job naming it."""
     from nonholonomic.lagrangian import DerivationError
     from nonholonomic.systems import lagrangian as lag
     from schemas.jobs import JobRequest
-    from workers.jobs import InvalidJob, run_job
+    from workers.jobs import run_job
 
-    def over_budget(data, budget_s=0.0):
-        raise DerivationError("the equations of motion could not be derived: did not finish within 60 s")
+    def fails(data):
+        raise DerivationError("the equations of motion could not be derived: sympy said no")
 
-    monkeypatch.setattr(lag, "derive", over_budget)
+    monkeypatch.setattr(lag, "derive", fails)
     body = _particle(parameters={"k": 1.0 + 2.0**-40})  # a system no earlier test defined (define is cached)
-    problems = JobRequest.model_validate(body).problems()
-    assert [p.field for p in problems] == ["system.L"] and "did not finish within 60 s" in problems[0].reason
-    with pytest.raises(InvalidJob, match="system.L: the equations of motion could not be derived"):
+    assert JobRequest.model_validate(body).problems() == []
+    with pytest.raises(DerivationError, match="sympy said no"):
         run_job(body)
 
 

@@ -5,7 +5,6 @@ against an independent numpy computation."""
 from __future__ import annotations
 
 import io
-import time
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -250,18 +249,17 @@ def test_ball_on_quadric_trajectory_x_on_the_ellipsoid(quadric):
     assert _svg_texts(job_plot("integrals", result, request, "svg")).count("eq. 2804") >= 1
 
 
-def test_a_long_trajectory_is_plotted_quickly():
+def test_a_long_trajectory_is_plotted_from_capped_points():
+    """A long run (10,001 samples and every step's state) draws at most MAX_POINTS and MAX_LINE_POINTS
+    points, so each plot stays small. How long each takes is bench/bench_exports.py's (every plot of a long
+    job, PNG and SVG, drawn and cached over HTTP against the same plot drawn in-process), not a test's."""
     body = {**BALL_JOB, "t_final": 1000.0, "samples": 10_001}
     del body["poincare"], body["lyapunov"]
     result = run_job(body)
-    job_plot("integrals", result, body, "png")  # the compiled integrals once per process
     for name in ("trajectory", "integrals"):
         for fmt in plots.FORMATS:
-            start = time.perf_counter()
             data = job_plot(name, result, body, fmt)
-            elapsed = time.perf_counter() - start
-            assert elapsed < 3.0, (name, fmt, elapsed)
-            assert len(data) < 3_000_000
+            assert len(data) < 3_000_000, (name, fmt, len(data))
     fig = plots._trajectory_figure(result, body)
     assert len(fig.axes[0].get_lines()[0].get_data_3d()[0]) <= plot_orbit.MAX_POINTS  # dense output, capped
     drift = plots._integrals_figure(result, body).axes[0].get_lines()[0]

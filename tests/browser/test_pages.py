@@ -36,6 +36,11 @@ ENSEMBLE = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D"
             "poincare": {"surface": "gamma3", "coordinates": ["gamma1", "M3"]},
             "lyapunov": {"count": 1}}
 REPORT_CLAIMS = ["veselova.multiplier", "ball.measure", "ball.theorem_3"]
+#: Hang guard (seconds) of each wait (an API's start, a job, a page drawn): far above the seconds each
+#: needs on a quiet machine, never a result.
+GUARD_S = 300.0
+#: The same for what the browser waits for (milliseconds).
+GUARD_MS = int(GUARD_S * 1000)
 #: A name other than localhost for the service (Chromium maps it to 127.0.0.1): Swagger UI asks
 #: validator.swagger.io for a badge only when the page is not on localhost.
 NAMED_HOST = "docs.example.test"
@@ -58,7 +63,7 @@ def api(tmp_path_factory) -> Iterator[str]:
     proc = start_api(port, log, {"NONHOLONOMIC_WARM_UP": "false"})
     base = f"http://127.0.0.1:{port}"
     try:
-        wait_healthy(base, timeout=60)
+        wait_healthy(base, timeout=GUARD_S)
         yield base
     finally:
         stop(proc)
@@ -95,7 +100,7 @@ class Visit:
         self.page.on("request", lambda r: self.hosts.add(urlparse(r.url).netloc)
                      if urlparse(r.url).scheme in ("http", "https") else None)  # not data: or blob:
         self.page.on("response", lambda r: self.errors.append(f"{r.status} for {r.url}") if r.status >= 400 else None)
-        response = self.page.goto(url, wait_until="networkidle", timeout=60_000)
+        response = self.page.goto(url, wait_until="networkidle", timeout=GUARD_MS)
         assert response is not None and response.status == 200, url
         headers = response.headers
         assert headers.get("content-security-policy", "").startswith(policy.split("{")[0]), headers
@@ -124,13 +129,13 @@ def _submit(base: str, path: str, body: dict) -> str:
 
 def _wait_ensemble(base: str, location: str) -> dict:
     with httpx.Client(base_url=base, timeout=30) as client:
-        return poll_job(client, location, timeout=180, interval=0.2)
+        return poll_job(client, location, timeout=GUARD_S, interval=0.2)
 
 
 def test_job_page_shows_system_evidence_plots_and_exports(api, browser):
     location = _submit(api, "/v1/jobs", JOB)
     with httpx.Client(base_url=api, timeout=30) as client:
-        job = poll_job(client, location, timeout=120, interval=0.1)
+        job = poll_job(client, location, timeout=GUARD_S, interval=0.1)
     assert job["status"] == "succeeded", job
     result = job["result"]
     visit = Visit(browser, f"{api}{location}/page")
@@ -171,7 +176,7 @@ def test_long_formulas_wrap_in_a_narrow_window(api, browser):
     location = _submit(api, "/v1/jobs", {**JOB, "system": {**BALL, "potential": potential}, "t_final": 20.0,
                                          "poincare": None, "lyapunov": None})
     with httpx.Client(base_url=api, timeout=30) as client:
-        assert poll_job(client, location, timeout=120, interval=0.1)["status"] == "succeeded"
+        assert poll_job(client, location, timeout=GUARD_S, interval=0.1)["status"] == "succeeded"
     visit = Visit(browser, f"{api}{location}/page", width=900)
     assert "k12*gamma1*gamma2" in visit.page.locator("#system").inner_text()
     assert visit.page.evaluate("document.documentElement.scrollWidth <= window.innerWidth")
@@ -184,7 +189,7 @@ def test_lagrangian_job_page_shows_its_system_and_the_structure_verdicts(api, br
     classic = httpx.get(f"{api}/v1/systems/lagrangian", timeout=30).json()["classics"]["nonholonomic_particle"]
     location = _submit(api, "/v1/jobs", classic["job"])
     with httpx.Client(base_url=api, timeout=30) as client:
-        job = poll_job(client, location, timeout=120, interval=0.1)
+        job = poll_job(client, location, timeout=GUARD_S, interval=0.1)
     assert job["status"] == "succeeded", job
     visit = Visit(browser, f"{api}{location}/page", width=900)
     page = visit.page
@@ -197,11 +202,9 @@ def test_lagrangian_job_page_shows_its_system_and_the_structure_verdicts(api, br
     assert page.locator("#checks .passed").count() == len(job["result"]["checks"])
     assert "the coordinates q in space" in page.locator("#plots").inner_text()
     page.locator("#plots").scroll_into_view_if_needed()  # the plots load lazily, below the evidence
-    for _ in range(300):  # a hang guard of 60 s (wait_for_function evaluates a string: the page's CSP refuses it)
-        images = visit.images_loaded()
-        if images and all(width > 0 for _, width in images):
-            break
-        page.wait_for_timeout(200)
+    # (wait_for_function evaluates a string: the page's CSP refuses it)
+    _until(page, "(i => i.length > 0 && [...i].every(e => e.naturalWidth > 0))(document.images)")
+    images = visit.images_loaded()
     assert len(images) == 2 and all(width > 300 for _, width in images), images
     assert visit.page.evaluate("document.documentElement.scrollWidth <= window.innerWidth")
     visit.finish("job-lagrangian", api)
@@ -257,7 +260,7 @@ def test_a_chaos_maps_page_shows_the_map_its_summary_and_its_exports(api, browse
 def test_report_page_shows_every_claim_with_its_verdict(api, browser):
     location = _submit(api, "/v1/paper/report", {"claims": REPORT_CLAIMS})
     with httpx.Client(base_url=api, timeout=30) as client:
-        job = poll_job(client, location, timeout=240, interval=0.2)
+        job = poll_job(client, location, timeout=2 * GUARD_S, interval=0.2)
     assert job["status"] == "succeeded", job
     job_id = job["id"]
     for url in (f"{api}/v1/paper/report/{job_id}", f"{api}/v1/jobs/{job_id}/page"):
@@ -276,9 +279,9 @@ def test_docs_render_offline_with_every_operation(api, browser):
     operations = sum(1 for methods in spec["paths"].values() for m in methods if m in ("get", "post", "delete"))
     visit = Visit(browser, f"{api}/docs", DOCS_POLICY)
     page = visit.page
-    page.wait_for_selector(".swagger-ui .info .title", timeout=30_000)
+    page.wait_for_selector(".swagger-ui .info .title", timeout=GUARD_MS)
     assert "nonholonomic" in page.locator(".swagger-ui .info .title").inner_text()
-    page.wait_for_selector(".opblock", timeout=30_000)
+    page.wait_for_selector(".opblock", timeout=GUARD_MS)
     assert page.locator(".opblock").count() == operations
     visit.finish("docs", api)
 
@@ -288,7 +291,7 @@ def test_redoc_renders_offline_under_its_policy(api, browser):
     service serves it with an empty image instead (service.main.redoc_bundle), and no Google Fonts."""
     visit = Visit(browser, f"{api}/redoc", DOCS_POLICY)
     page = visit.page
-    page.wait_for_selector(".api-info h1", timeout=60_000)
+    page.wait_for_selector(".api-info h1", timeout=GUARD_MS)
     assert "nonholonomic" in page.locator(".api-info h1").inner_text()
     assert page.locator("[data-section-id]").count() > 10  # the operations are drawn
     visit.finish("redoc", api)  # no CSP violation, no error, no host but the service
@@ -297,20 +300,20 @@ def test_redoc_renders_offline_under_its_policy(api, browser):
 def test_docs_and_redoc_on_a_named_host_ask_nothing_from_elsewhere(api, browser):
     named = api.replace("127.0.0.1", NAMED_HOST)
     docs = Visit(browser, f"{named}/docs", DOCS_POLICY)
-    docs.page.wait_for_selector(".opblock", timeout=30_000)
+    docs.page.wait_for_selector(".opblock", timeout=GUARD_MS)
     docs.page.wait_for_timeout(500)
     docs.finish("docs-named-host", named)
     redoc = Visit(browser, f"{named}/redoc", DOCS_POLICY)
-    redoc.page.wait_for_selector("[data-section-id]", timeout=60_000)
+    redoc.page.wait_for_selector("[data-section-id]", timeout=GUARD_MS)
     redoc.finish("redoc-named-host", named)
 
 
-def _until(page, expression: str, timeout: float = 30.0) -> float:
+def _until(page, expression: str, timeout: float = GUARD_S) -> float:
     """Seconds until ``expression`` is true in the page (polled every 10 ms: ``wait_for_function`` evaluates a
     string, which the page's CSP refuses); ``timeout`` is a hang guard."""
     start = time.perf_counter()
     while not page.evaluate(expression):
-        assert time.perf_counter() - start < timeout, f"not within {timeout} s: {expression}"
+        assert time.perf_counter() - start < timeout, f"hang guard: not within {timeout:g} s: {expression}"
         page.wait_for_timeout(10)
     return time.perf_counter() - start
 

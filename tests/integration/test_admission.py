@@ -1,10 +1,10 @@
 """Admission control under a real uvicorn: the symbolic pool refuses what it cannot hold with a 503 and
 ``Retry-After`` (never a 408 storm), and ``/health`` keeps answering 200 while it is full (its latency is
-measured in ``bench/``)."""
+measured in ``bench/bench_admission.py`` and ``bench/bench_load.py``, not here)."""
 
 from __future__ import annotations
 
-import statistics
+import json
 import subprocess
 import sys
 import threading
@@ -19,21 +19,27 @@ pytestmark = pytest.mark.integration
 
 SO3 = {"variables": ["x", "y", "z"], "matrix": [["0", "z", "-y"], ["-z", "0", "x"], ["y", "-x", "0"]],
        "casimirs": {"|x|^2": "x**2 + y**2 + z**2"}}
-#: Prints the seconds of each ``GET /health`` (200 only) until terminated.
+#: Hang guard (seconds) of one ``GET /health`` of the probe: far above its hundredths of a second.
+HEALTH_GUARD_S = 60.0
+#: Prints each ``GET /health``'s status and the symbolic pool it reports, as a JSON line, until terminated
+#: (a request past the hang guard prints status 0).
 PROBE = """
-import sys, time, httpx
-with httpx.Client(base_url=sys.argv[1], timeout=5) as client:
+import json, sys, time, httpx
+with httpx.Client(base_url=sys.argv[1], timeout=float(sys.argv[2])) as client:
     while True:
-        start = time.perf_counter()
-        status = client.get("/health").status_code
-        print(time.perf_counter() - start if status == 200 else 99.0, flush=True)
+        try:
+            r = client.get("/health")
+            line = {"status": r.status_code, "symbolic": r.json().get("symbolic")}
+        except httpx.TimeoutException:
+            line = {"status": 0, "symbolic": None}
+        print(json.dumps(line), flush=True)
         time.sleep(0.02)
 """
 #: The issue's storm was 44 concurrent symbolic requests.
 CONCURRENT = 44
 
 
-def test_a_storm_of_symbolic_requests_gets_503s_with_retry_after_and_health_stays_fast(tmp_path):
+def test_a_storm_of_symbolic_requests_gets_503s_with_retry_after_and_health_keeps_answering(tmp_path):
     port = free_port()
     api = start_api(port, tmp_path / "api.log", {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false",
                                                  "NONHOLONOMIC_SYMBOLIC_WORKERS": "2",
@@ -43,9 +49,10 @@ def test_a_storm_of_symbolic_requests_gets_503s_with_retry_after_and_health_stay
                                                  "NONHOLONOMIC_CACHE_DIR": "off"})
     base = f"http://127.0.0.1:{port}"
     try:
-        wait_healthy(base, timeout=60)
+        wait_healthy(base, timeout=300)  # a hang guard: an API starts within seconds
         # /health is probed from a process of its own, so that the storm's client threads do not delay it
-        prober = subprocess.Popen([sys.executable, "-c", PROBE, base], stdout=subprocess.PIPE, text=True)
+        prober = subprocess.Popen([sys.executable, "-c", PROBE, base, str(HEALTH_GUARD_S)], stdout=subprocess.PIPE,
+                                  text=True)
         time.sleep(0.5)
         answers: list[httpx.Response] = []
         clients = [httpx.Client(base_url=base, timeout=120) for _ in range(CONCURRENT)]
@@ -60,7 +67,8 @@ def test_a_storm_of_symbolic_requests_gets_503s_with_retry_after_and_health_stay
         for t in posters:
             t.join()
         prober.terminate()
-        health_s = [float(line) for line in prober.communicate(timeout=10)[0].split()]
+        out = prober.communicate(timeout=HEALTH_GUARD_S)[0]
+        probes = [json.loads(line) for line in out.splitlines() if line.endswith("}")]  # not one cut short
 
         codes = sorted(r.status_code for r in answers)
         assert set(codes) <= {200, 503}, codes  # no 408, no 500
@@ -73,10 +81,11 @@ def test_a_storm_of_symbolic_requests_gets_503s_with_retry_after_and_health_stay
         for r in answers:
             if r.status_code == 200:
                 assert r.json()["jacobi"]["passed"] and r.json()["casimirs"][0]["passed"]
-        # /health needs no request thread: it keeps answering 200 while every slot and the queue are taken.
-        # A hang guard, not a latency result (0.01 s median quiet, 0.2 s max with two busy processes beside
-        # the suite; its p99 is measured in bench/bench_admission.py and bench/bench_load.py)
-        assert len(health_s) >= 5 and max(health_s) < 2.0, (max(health_s), statistics.median(health_s))
+        # /health needs no request thread: it keeps answering 200 while every slot and the queue are taken
+        # (how fast is bench/bench_admission.py's and bench/bench_load.py's, its p99 against 100 ms)
+        assert probes and all(p["status"] == 200 for p in probes), [p for p in probes if p["status"] != 200][:5]
+        full = {"size": 2, "queue": 4, "running": 2, "waiting": 4}
+        assert any({k: p["symbolic"][k] for k in full} == full for p in probes), probes[:: max(1, len(probes) // 20)]
         pool = httpx.get(f"{base}/health").json()["symbolic"]
         assert pool == {"size": 2, "queue": 4, "running": 0, "waiting": 0, "refused": len(busy)}
         # after the storm, the pool serves again

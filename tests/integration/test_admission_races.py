@@ -66,7 +66,8 @@ def _at_once(requests: list[tuple[str, str, dict]]) -> list[httpx.Response]:
 
 
 def _answering(base: str) -> None:
-    wait_until(lambda: httpx.get(f"{base}/health", timeout=5).status_code in (200, 503), 120, base)
+    wait_until(lambda: httpx.get(f"{base}/health", timeout=5).status_code in (200, 503), 300,
+               f"{base} (a hang guard: an API starts within seconds on a quiet machine)")
 
 
 @pytest.fixture()

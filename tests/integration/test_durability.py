@@ -41,6 +41,9 @@ LONG = {**BODY, "t_final": 2e6}
 #: Four members in two chunks.
 ENSEMBLE = {"system": BODY["system"], "t_final": 20.0, "chunk_size": 2,
             "members": {"sample": {"count": 4, "seed": 3, "level": {"energy": 1.0}}}}
+#: Hang guard (seconds) of each wait: far above the seconds a quiet machine needs (an API's start, a job,
+#: a first compile), never a result.
+GUARD_S = 300.0
 
 
 def _without_times(value):
@@ -71,12 +74,12 @@ def test_an_api_restart_loses_no_job_and_no_result(tmp_path, how):
     base = f"http://127.0.0.1:{port}"
     api = _api(port, data, tmp_path / "api-1.log")
     try:
-        wait_healthy(base, timeout=60)
+        wait_healthy(base, timeout=GUARD_S)
         with httpx.Client(base_url=base, timeout=10) as client:
-            done = poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"], timeout=60)
+            done = poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"], timeout=GUARD_S)
             assert done["status"] == "succeeded"
             finished = client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]
-            finished_view = poll_job(client, finished, timeout=60)
+            finished_view = poll_job(client, finished, timeout=GUARD_S)
             assert finished_view["status"] == "succeeded"
             finished_members = _members(client, finished)
             running = client.post("/v1/jobs", json=LONG).headers["location"]
@@ -84,28 +87,29 @@ def test_an_api_restart_loses_no_job_and_no_result(tmp_path, how):
             cancelled = client.post("/v1/jobs", json=LONG).headers["location"]
             assert client.delete(cancelled).status_code == 202
             pending = client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]  # waits too
-            wait_until(lambda: client.get(running).json()["status"] == "running", 30, "the long job to run")
+            wait_until(lambda: client.get(running).json()["status"] == "running", GUARD_S,
+                       "the long job to run (a hang guard)")
             assert client.get(queued).json()["status"] == "queued"
             assert client.get(pending).json()["status"] == "queued"
         api.send_signal(how)
-        api.wait(30)
+        api.wait(GUARD_S)
     finally:
         stop(api)
 
     api = _api(port, data, tmp_path / "api-2.log")
     try:
-        wait_healthy(base, timeout=60)
+        wait_healthy(base, timeout=GUARD_S)
         with httpx.Client(base_url=base, timeout=10) as client:
             again = client.get(f"/v1/jobs/{done['id']}").json()
             assert again == done  # the same record and result, bit for bit
             for location in (running, queued):  # run again after the restart
-                view = poll_job(client, location, timeout=120)
+                view = poll_job(client, location, timeout=GUARD_S)
                 assert view["status"] == "succeeded", view["error"]
             assert client.get(cancelled).json()["status"] == "cancelled"
             listed = {item["location"] for item in client.get("/v1/jobs").json()["items"]}
             assert {f"/v1/jobs/{done['id']}", running, queued, cancelled} <= listed
             _same_ensemble(client, finished, finished_view, finished_members)
-            resumed = poll_job(client, pending, timeout=120)  # its chunks run after the restart
+            resumed = poll_job(client, pending, timeout=GUARD_S)  # its chunks run after the restart
             assert resumed["status"] == "succeeded" and resumed["members_done"] == 4
             assert _members(client, pending) == finished_members  # the same members, the same numbers
     except Exception:
@@ -162,12 +166,12 @@ class QueueStack:
 
     def start_api(self) -> None:
         self.api = start_api(self.port, self._log("api"), self.env)
-        wait_until(lambda: self.client.get("/health").status_code in (200, 503), 60, "the API")
+        wait_until(lambda: self.client.get("/health").status_code in (200, 503), GUARD_S, "the API (a hang guard)")
 
     def start_worker(self) -> None:
         self.worker = start_worker(self.env["REDIS_URL"], self.queue, self._log("worker"),
                                    extra_env={k: v for k, v in self.env.items() if k != "REDIS_URL"})
-        wait_healthy(self.base, timeout=180)
+        wait_healthy(self.base, timeout=GUARD_S)
 
     def stop(self) -> None:
         for proc in (self.api, self.worker):
@@ -177,6 +181,15 @@ class QueueStack:
 
     def logs(self) -> str:
         return "\n".join(f"--- {p.name}\n{p.read_text()[-2500:]}" for p in sorted(self.tmp.glob("*.log")))
+
+    def whole_logs(self) -> str:
+        """Every log of the test whole (``logs`` keeps their ends only)."""
+        return "\n".join(p.read_text() for p in sorted(self.tmp.glob("*.log")))
+
+    def wait_logged(self, text: str) -> None:
+        """Wait until a log holds ``text``: a process logs what it did a moment after doing it (a worker's
+        sweep logs the jobs it sent again after sending them, which may run and end first)."""
+        wait_until(lambda: text in self.whole_logs(), GUARD_S, f"{text!r} in the logs (a hang guard)")
 
 
 def test_a_redis_restart_loses_no_job_and_no_result(tmp_path):
@@ -188,10 +201,10 @@ def test_a_redis_restart_loses_no_job_and_no_result(tmp_path):
         wait_until(lambda: redis_available(stack.env["REDIS_URL"]), 30, "the test's Redis")
         stack.start_api()
         stack.start_worker()
-        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=120)
+        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=GUARD_S)
         assert done["status"] == "succeeded"
         finished = stack.client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]
-        finished_view = poll_job(stack.client, finished, timeout=120)
+        finished_view = poll_job(stack.client, finished, timeout=GUARD_S)
         assert finished_view["status"] == "succeeded"
         finished_members = _members(stack.client, finished)
         stop(stack.worker)  # no worker: the next job and ensemble wait in Redis
@@ -214,13 +227,13 @@ def test_a_redis_restart_loses_no_job_and_no_result(tmp_path):
         assert accepted.status_code == 202
         stack.start_worker()
         for location in (waiting, accepted.headers["location"]):  # the lost message is sent again
-            view = poll_job(stack.client, location, timeout=60)
+            view = poll_job(stack.client, location, timeout=GUARD_S)
             assert view["status"] == "succeeded", view["error"]
             assert view["result"]["final_state"] == done["result"]["final_state"]
-        again = poll_job(stack.client, waiting_ensemble, timeout=60)  # its lost chunks are sent again
+        again = poll_job(stack.client, waiting_ensemble, timeout=GUARD_S)  # its lost chunks are sent again
         assert again["status"] == "succeeded" and _members(stack.client, waiting_ensemble) == finished_members
-        assert "whose message or worker was lost" in stack.logs()
-        assert "pending chunks of 1 ensemble(s) whose messages were lost" in stack.logs()
+        stack.wait_logged("whose message or worker was lost")
+        stack.wait_logged("pending chunks of 1 ensemble(s) whose messages were lost")
     except Exception:
         print(stack.logs())
         raise
@@ -241,10 +254,11 @@ def test_a_postgresql_restart_loses_no_job_and_no_result(tmp_path):
     try:
         stack.start_api()
         stack.start_worker()
-        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=120)
+        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=GUARD_S)
         assert done["status"] == "succeeded"
         running = stack.client.post("/v1/jobs", json=LONG).headers["location"]
-        wait_until(lambda: stack.client.get(running).json()["status"] == "running", 60, "the long job to run")
+        wait_until(lambda: stack.client.get(running).json()["status"] == "running", GUARD_S,
+                   "the long job to run (a hang guard)")
         behind = stack.client.post("/v1/jobs", json=BODY).headers["location"]  # one process: it waits
         ensemble = stack.client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]  # and its chunks
 
@@ -259,15 +273,15 @@ def test_a_postgresql_restart_loses_no_job_and_no_result(tmp_path):
 
         _postgres(data, pg_port, start=True)
         for location in (running, behind):  # the result kept and written; the start retried
-            view = poll_job(stack.client, location, timeout=120)
+            view = poll_job(stack.client, location, timeout=GUARD_S)
             assert view["status"] == "succeeded", view["error"]
         assert stack.client.get(f"/v1/jobs/{done['id']}").json() == done
-        view = poll_job(stack.client, ensemble, timeout=120)  # chunks that met the outage tried again
+        view = poll_job(stack.client, ensemble, timeout=GUARD_S)  # chunks that met the outage tried again
         assert view["status"] == "succeeded" and view["members_done"] == 4
         assert all(m["status"] == "succeeded" for m in _members(stack.client, ensemble))
         after = stack.client.post("/v1/jobs", json=BODY)
         assert after.status_code == 202
-        assert poll_job(stack.client, after.headers["location"], timeout=60)["status"] == "succeeded"
+        assert poll_job(stack.client, after.headers["location"], timeout=GUARD_S)["status"] == "succeeded"
     except Exception:
         print(stack.logs())
         raise
@@ -286,16 +300,17 @@ def test_an_api_restart_in_queue_mode_loses_nothing(tmp_path):
     try:
         stack.start_api()
         stack.start_worker()
-        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=120)
+        done = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=GUARD_S)
         running = stack.client.post("/v1/jobs", json=LONG).headers["location"]
         ensemble = stack.client.post("/v1/ensembles", json=ENSEMBLE).headers["location"]
-        wait_until(lambda: stack.client.get(running).json()["status"] == "running", 60, "the long job to run")
+        wait_until(lambda: stack.client.get(running).json()["status"] == "running", GUARD_S,
+                   "the long job to run (a hang guard)")
         stack.api.send_signal(signal.SIGKILL)
         stack.api.wait(10)
         stack.start_api()
         assert stack.client.get(f"/v1/jobs/{done['id']}").json() == done
-        assert poll_job(stack.client, running, timeout=120)["status"] == "succeeded"  # the worker went on
-        assert poll_job(stack.client, ensemble, timeout=120)["status"] == "succeeded"
+        assert poll_job(stack.client, running, timeout=GUARD_S)["status"] == "succeeded"  # the worker went on
+        assert poll_job(stack.client, ensemble, timeout=GUARD_S)["status"] == "succeeded"
         listed = {i["location"] for i in stack.client.get("/v1/jobs").json()["items"]}
         assert {f"/v1/jobs/{done['id']}", running} <= listed
     except Exception:

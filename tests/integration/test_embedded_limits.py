@@ -11,7 +11,6 @@
 from __future__ import annotations
 
 import signal
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -28,8 +27,9 @@ BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.
 ENDLESS = {**BODY, "t_final": 1e9}
 #: Soft and hard limits of these tests (the soft one well above a first job's compile on a busy machine).
 SOFT_S, HARD_S = 8, 16
-#: Hang guard for a small job, far above the few seconds it needs.
-SMALL_GUARD_S = 60.0
+#: Hang guard (seconds) of each wait (an API's start, a small job, a job's first compile): far above the
+#: few seconds each needs on a quiet machine, never a result.
+GUARD_S = 300.0
 
 
 class EmbeddedAPI:
@@ -46,7 +46,7 @@ class EmbeddedAPI:
         self.process = start_api(self.port, self.tmp / f"api-{self.starts}.log", {
             "REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false", "NONHOLONOMIC_MAX_T_FINAL": "1e9",
             "NONHOLONOMIC_DATA_DIR": str(self.tmp / "data"), **self.limits})
-        wait_healthy(self.base, timeout=60)
+        wait_healthy(self.base, timeout=GUARD_S)
 
     def post(self, body: dict) -> str:
         r = self.client.post("/v1/jobs", json=body)
@@ -76,12 +76,12 @@ def api(request, tmp_path) -> Iterator[EmbeddedAPI]:
 
 def test_a_job_past_its_time_limit_frees_the_thread_also_after_a_restart(api):
     endless = api.post(ENDLESS)
-    wait_until(lambda: api.client.get(endless).json()["progress"] > 0, 60, "the endless job to run")
+    wait_until(lambda: api.client.get(endless).json()["progress"] > 0, GUARD_S, "the endless job to run (a hang guard)")
     api.process.send_signal(signal.SIGKILL)  # the audit: the poison job is resumed by the next start
     api.process.wait(10)
     api.start()
     small = api.post(BODY)  # behind the resumed job, on the one thread
-    view = poll_job(api.client, small, timeout=SMALL_GUARD_S + SOFT_S)
+    view = poll_job(api.client, small, timeout=GUARD_S + SOFT_S)
     assert view["status"] == "succeeded", view["error"]
     poisoned = api.client.get(endless).json()
     assert poisoned["status"] == "failed"
@@ -95,11 +95,11 @@ def test_a_surface_not_smooth_where_the_orbit_meets_it_ends_the_job_clearly(api)
             assert any(e["field"] == "poincare.surface" for e in r.json()["errors"]), r.text
             continue
         assert r.status_code == 202, r.text
-        view = poll_job(api.client, r.headers["location"], timeout=SMALL_GUARD_S)
+        view = poll_job(api.client, r.headers["location"], timeout=GUARD_S)
         assert view["status"] == "failed", surface
         assert view["error"]["type"] == "IntegrationError"
         assert "the surface is not finite or not smooth where the orbit meets it" in view["error"]["message"]
-    view = poll_job(api.client, api.post(BODY), timeout=SMALL_GUARD_S)
+    view = poll_job(api.client, api.post(BODY), timeout=GUARD_S)
     assert view["status"] == "succeeded", view["error"]
 
 
@@ -107,10 +107,24 @@ def test_cancelling_a_job_inside_a_long_heyoka_call_stops_it_and_frees_the_threa
     # One QR interval spanning the whole run: one long propagation, minutes of variational equations.
     body = {**BODY, "t_final": 2e6, "lyapunov": {"interval": 2e6}}
     location = api.post(body)
-    wait_until(lambda: api.client.get(location).json()["progress"] >= 0.49, 120, "the trajectory's end")
-    time.sleep(3.0)  # inside the spectrum's propagation (the second half of the job)
-    assert api.client.delete(location).status_code == 202
-    assert api.client.get(location).json()["status"] == "cancelled"
-    view = poll_job(api.client, api.post(BODY), timeout=SMALL_GUARD_S)
+    # inside the spectrum's propagation: the second half of the job, past 0.5 once its first piece reported
+    # (the variational equations compiled)
+    wait_until(lambda: api.client.get(location).json()["progress"] > 0.5, GUARD_S,
+               "the spectrum's propagation (a hang guard)")
+    r = api.client.delete(location)
+    assert r.status_code == 202 and r.json()["status"] == "cancelled"
+    # The one job thread runs a small job once the cancelled one let go of it. Meanwhile the cancelled
+    # job's progress is written at most once more (the report that sees the cancellation), then its thread
+    # leaves: it did not run on through the spectrum.
+    small = api.post(BODY)
+    seen: list[float] = []
+
+    def small_ended() -> bool:
+        seen.append(api.client.get(location).json()["progress"])
+        assert len(set(seen) - {r.json()["progress"]}) <= 2, seen
+        return api.client.get(small).json()["status"] in ("succeeded", "failed", "cancelled")
+
+    wait_until(small_ended, GUARD_S, "the small job behind the cancelled one (a hang guard)", interval=0.01)
+    view = api.client.get(small).json()
     assert view["status"] == "succeeded", view["error"]
     assert api.client.get(location).json()["status"] == "cancelled"

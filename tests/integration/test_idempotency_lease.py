@@ -36,13 +36,17 @@ from tests.support import (
 pytestmark = pytest.mark.integration
 
 LEASE_S = 6.0
+#: Hang guard (seconds) of the waits: an API's start and the lease's few seconds take far less on a quiet
+#: machine; never a result (when the key is free again is the store's lease, not this test's bound).
+GUARD_S = 300.0
 KEY = {"X-API-Key": "alpha-secret"}
 BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
         "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 11}
 
 
 def _answering(base: str) -> None:
-    wait_until(lambda: httpx.get(f"{base}/health", timeout=5).status_code in (200, 503), 120, base)
+    wait_until(lambda: httpx.get(f"{base}/health", timeout=5).status_code in (200, 503), GUARD_S,
+               f"{base} (a hang guard)")
 
 
 def test_a_key_whose_api_died_mid_request_is_free_again_after_its_lease(tmp_path: Path):
@@ -75,7 +79,8 @@ def test_a_key_whose_api_died_mid_request_is_free_again_after_its_lease(tmp_path
             wait_until(lambda: lock.execute(text(
                 "SELECT count(*) FROM pg_locks l JOIN pg_class c ON c.oid = l.relation "
                 "WHERE c.relname = 'jobs' AND NOT l.granted "
-                "AND l.database = (SELECT oid FROM pg_database WHERE datname = current_database())")).scalar() >= 1, 60, "the POST to wait for the table")
+                "AND l.database = (SELECT oid FROM pg_database WHERE datname = current_database())")).scalar() >= 1, GUARD_S,
+                "the POST to wait for the table (a hang guard)")
             time.sleep(1.5 * LEASE_S)  # served longer than its lease: renewed, still in progress
             busy = other.post("/v1/jobs", json=BODY, headers=headers)
             assert busy.status_code == 409 and busy.headers["retry-after"] == "1", busy.text
@@ -95,7 +100,7 @@ def test_a_key_whose_api_died_mid_request_is_free_again_after_its_lease(tmp_path
             answers.append(again.post("/v1/jobs", json=BODY, headers=headers))
             return answers[-1].status_code != 409
 
-        wait_until(retried, 10 * LEASE_S, "the key to be free again", interval=0.25)
+        wait_until(retried, GUARD_S, "the key to be free again (a hang guard)", interval=0.25)
         free_after_s = time.monotonic() - killed_at
         first = answers[-1]
         assert first.status_code == 202 and "idempotent-replayed" not in first.headers, first.text  # a normal 202
@@ -111,7 +116,6 @@ def test_a_key_whose_api_died_mid_request_is_free_again_after_its_lease(tmp_path
         finally:
             jobs.close()
         print(f"key free again {free_after_s:.1f} s after its API was killed (lease {LEASE_S:g} s)")
-        assert free_after_s <= 10 * LEASE_S  # hang guard only; the lease's bound is the store's
     except Exception:
         for log in sorted(tmp_path.glob("*.log")):
             print(f"--- {log.name}\n{log.read_text()[-3000:]}")

@@ -6,7 +6,7 @@ queue of its own, so a running deployment is not disturbed.
 
 from __future__ import annotations
 
-import time
+import re
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -38,6 +38,16 @@ BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.
                    "potential": {"kind": "brun", "k": 0.4}},
         "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 101}
 LIMITS = {"NONHOLONOMIC_MAX_T_FINAL": "1e9"}
+#: Hang guard (seconds) of a wait for a small job or a state the worker reaches in a fraction of a second
+#: on a quiet machine; never a result.
+GUARD_S = 120.0
+
+
+def _end_of(log: str, job_id: str) -> str | None:
+    """How the worker logged the end of job ``job_id``'s task (``ignored``: stopped by its cancellation;
+    ``succeeded``: ran to its end), None if it did not."""
+    found = re.search(rf"Task nonholonomic\.simulate\[{re.escape(job_id)}\] (ignored|succeeded|raised)", log)
+    return found[1] if found else None
 
 
 def _dump_logs(logs: Path) -> str:
@@ -65,16 +75,17 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, s
         no_worker = httpx.get(f"{base}/health", timeout=5)
         # A worker's heartbeat before its warm-up ends: it consumes the queue with no warm process.
         cold = f"{PREFIX}worker:compiling:1"
-        store.set(cold, '{"name": "compiling@elsewhere", "queues": ["%s"]}' % queue, ex=30)
+        store.set(cold, '{"name": "compiling@elsewhere", "queues": ["%s"]}' % queue, ex=int(2 * GUARD_S))
         seen: list[httpx.Response] = []  # /health may answer with a check up to 0.25 s old: poll
         wait_until(lambda: "warm-up" in (seen.append(httpx.get(f"{base}/health", timeout=5)) or seen[-1].text),
-                   20, "/health to see the compiling worker")
+                   GUARD_S, "/health to see the compiling worker (a hang guard)")
         compiling = seen[-1]
         store.delete(cold)
         worker = start_worker(TEST_REDIS_URL, queue, logs / "worker.log", extra_env=LIMITS)
-        wait_healthy(base, timeout=180)
+        wait_healthy(base, timeout=600)  # a hang guard: the worker's warm-up is ~35 s cold on 2 quiet cores
         with httpx.Client(base_url=base, timeout=10) as client:
             client.before_worker = (no_worker, compiling)  # type: ignore[attr-defined]
+            client.worker_log = logs / "worker.log"  # type: ignore[attr-defined]
             yield client, store, queue
     except Exception:
         print(_dump_logs(logs))
@@ -109,8 +120,12 @@ def test_health_reads_the_heartbeats_and_names_no_host(queue_stack):
     from workers.heartbeat import PREFIX
 
     client, store, queue = queue_stack
-    store.set(f"{PREFIX}worker:elsewhere:1", '{"name": "cold@elsewhere", "queues": ["%s"]}' % queue, ex=5)
-    health = client.get("/health").json()
+    store.set(f"{PREFIX}worker:elsewhere:1", '{"name": "cold@elsewhere", "queues": ["%s"]}' % queue,
+              ex=int(2 * GUARD_S))
+    seen: list[dict] = []  # /health may answer with a check begun before the heartbeat was written: poll
+    wait_until(lambda: "cold@elsewhere" in (seen.append(client.get("/health").json()) or seen[-1])["workers"],
+               GUARD_S, "/health to read the new heartbeat (a hang guard)")
+    health = seen[-1]
     assert health["workers"]["cold@elsewhere"] == {"queues": [queue], "warm_processes": 0}
     warm = [w for name, w in health["workers"].items() if name != "cold@elsewhere"]
     assert health["status"] == "ok" and sum(w["warm_processes"] for w in warm) == 1  # concurrency 1
@@ -148,7 +163,7 @@ def test_a_job_the_worker_refuses_is_reported_failed_with_its_reason(queue_stack
     bad = {**BODY, "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.0, 3.0]}}
     sender = Celery(broker=TEST_REDIS_URL, backend=TEST_REDIS_URL)
     sender.send_task("nonholonomic.simulate", args=[bad], task_id=job_id, queue=queue)
-    view = poll_job(client, f"/v1/jobs/{job_id}", timeout=30)
+    view = poll_job(client, f"/v1/jobs/{job_id}", timeout=GUARD_S)
     assert view["status"] == "failed" and view["result"] is None
     assert view["error"]["type"] == "InvalidJob" and "initial_state.gamma" in view["error"]["message"]
 
@@ -170,18 +185,24 @@ def test_invalid_job_is_refused_before_anything_is_queued(queue_stack):
 def test_progress_moves_and_cancel_stops_the_running_job(queue_stack):
     client, _, _ = queue_stack
     location = client.post("/v1/jobs", json={**BODY, "t_final": 1e8, "samples": 2}).headers["location"]
-    wait_until(lambda: client.get(location).json()["progress"] > 0, 300, "progress")
+    wait_until(lambda: client.get(location).json()["progress"] > 0, 300, "progress (a hang guard)")
     first = client.get(location).json()
-    time.sleep(0.6)
-    second = client.get(location).json()
+    seen: list[dict] = []  # the next progress write (every 0.2 s of the job's; later on a loaded machine)
+    wait_until(lambda: (seen.append(client.get(location).json()) or seen[-1])["progress"] != first["progress"],
+               GUARD_S, "progress to move (a hang guard)")
+    second = seen[-1]
     assert first["status"] == second["status"] == "running"
     assert 0 < first["progress"] < second["progress"] < 1
     r = client.delete(location)
     assert r.status_code == 202 and r.json()["status"] == "cancelled"
-    # With one worker process, a new job can only finish once the cancelled one let go of it.
-    start = time.monotonic()
-    view = poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"], timeout=30)
-    assert view["status"] == "succeeded" and time.monotonic() - start < 10
+    # With one worker process, a new job can only run once the cancelled one let go of it; the cancelled
+    # one stopped at its next progress report (its task ignored), it did not run to its end (succeeded).
+    view = poll_job(client, client.post("/v1/jobs", json=BODY).headers["location"], timeout=GUARD_S)
+    assert view["status"] == "succeeded", view["error"]
+    log = client.worker_log.read_text()
+    cancelled_id = location.rsplit("/", 1)[1]
+    assert _end_of(log, cancelled_id) == "ignored", log[-3000:]
+    assert log.index(f"simulate[{cancelled_id}] ignored") < log.index(f"simulate[{view['id']}] received")
     assert client.get(location).json()["status"] == "cancelled"
 
 
@@ -197,7 +218,7 @@ def test_paper_report_and_a_map_run_through_the_worker(queue_stack):
     assert page.status_code == 200 and "ERRATA 8" in page.text
     job = {**BODY, "system": {**BODY["system"], "potential": {"kind": "zero"}}, "checks": ["isomorphisms"],
            "initial_state": {"M": [0.5, -0.2, 0.15], "gamma": [0.0, 0.6, 0.8]}}  # Theorem 3: U = 0, (M, gamma) = 0
-    view = poll_job(client, client.post("/v1/jobs", json=job).headers["location"], timeout=120)
+    view = poll_job(client, client.post("/v1/jobs", json=job).headers["location"], timeout=300)
     assert view["status"] == "succeeded", view["error"]
     assert [c["passed"] for c in view["result"]["checks"]] == [True, True]
 
@@ -215,7 +236,7 @@ def test_embedded_mode_serves_the_same_api_without_redis(tmp_path):
     api = start_api(port, tmp_path / "api.log", {"REDIS_URL": ""})
     base = f"http://127.0.0.1:{port}"
     try:
-        wait_healthy(base, timeout=120)
+        wait_healthy(base, timeout=600)  # a hang guard: the warm-up is ~35 s cold on 2 quiet cores
         with httpx.Client(base_url=base, timeout=10) as client:
             assert client.get("/health").json()["mode"] == "embedded"
             r = client.post("/v1/jobs", json=BODY)

@@ -56,9 +56,9 @@ def proxy(tmp_path_factory) -> Iterator[tuple[str, int]]:
                               "-g", f"daemon off; pid {tmp / 'nginx.pid'};"],
                              stdout=(tmp / "nginx.log").open("w"), stderr=subprocess.STDOUT)
     try:
-        wait_healthy(f"http://127.0.0.1:{api_port}", timeout=120)
-        wait_until(lambda: httpx.get(f"http://127.0.0.1:{proxy_port}/health", timeout=5).status_code == 200, 30,
-                   "nginx to answer")
+        wait_healthy(f"http://127.0.0.1:{api_port}", timeout=300)
+        wait_until(lambda: httpx.get(f"http://127.0.0.1:{proxy_port}/health", timeout=5).status_code == 200, GUARD_S,
+                   "nginx to answer (a hang guard)")
         yield "127.0.0.1", proxy_port
     finally:
         stop(nginx)
@@ -101,9 +101,9 @@ def test_slow_and_idle_connections_are_closed_by_the_proxy(proxy):
         with socket.create_connection((host, port), timeout=10) as s:
             outcome["drip"] = _closed_by_server(s, header)
 
-    def keep_alive() -> None:
-        with socket.create_connection((host, port), timeout=10) as s:
-            s.sendall(b"GET /health HTTP/1.1\r\nHost: x\r\n\r\n")
+    def keep_alive() -> None:  # answered, then idle: a static file, whose 200 no load of the machine changes
+        with socket.create_connection((host, port), timeout=10) as s:  # (/health's may say degraded)
+            s.sendall(b"GET /static/favicon.svg HTTP/1.1\r\nHost: x\r\n\r\n")
             outcome["keep-alive"] = _closed_by_server(s)
 
     threads = [threading.Thread(target=f) for f in (idle, drip, keep_alive)]
@@ -121,8 +121,13 @@ def test_slow_and_idle_connections_are_closed_by_the_proxy(proxy):
 def test_ordinary_requests_pass_with_the_security_headers(proxy):
     host, port = proxy
     with httpx.Client(base_url=f"http://{host}:{port}", timeout=30) as client:
-        r = client.get("/health")
-        assert r.status_code == 200 and r.json()["status"] == "ok"
+        # /health may say degraded a moment on a loaded machine (its latest check too old): the proxy passes
+        # what the API answers, so wait for the API's 200 (a hang guard), then look at the headers
+        seen: list[httpx.Response] = []
+        wait_until(lambda: (seen.append(client.get("/health")) or seen[-1]).status_code == 200, GUARD_S,
+                   "/health through the proxy (a hang guard)")
+        r = seen[-1]
+        assert r.json()["status"] == "ok"
         assert r.headers["x-content-type-options"] == "nosniff" and r.headers["x-frame-options"] == "DENY"
         # refused by the proxy before the API reads it, with the same problem+json and headers
         too_large = client.post("/v1/jobs", content=b"x" * ((1 << 20) + 1), headers={"content-type": "application/json"})

@@ -1,7 +1,8 @@
-"""Issue 19, item 1 under a real uvicorn: the audit's expensive expressions (a Poincaré surface
-``(M1+gamma2+gamma3+1)**64``, a surface Phi of 59 nested sin, a long sum of distinct terms) each answer
-within the validation budget with a 202 or a 422 naming the field, and ``/health``, polled meanwhile
-from a process of its own, answers every time (on main: 152 s for one POST, /health 4.4 s)."""
+"""Issue 19, item 1 under a real uvicorn, with issue 31's rule: the audit's expensive expressions (a Poincaré
+surface ``(M1+gamma2+gamma3+1)**64``, a surface Phi of 59 nested sin) are 422s naming the measure of their work
+and its limit, a long sum of distinct terms within the measures is accepted (202): the same answers at any load;
+``/health``, polled meanwhile from a process of its own, answers every time (on main: 152 s for one POST,
+/health 4.4 s). Its latency is measured in bench/bench_validation.py, not asserted here."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import time
 import httpx
 import pytest
 
-from tests.api.test_validation_budget import LONG_SUM, NESTED_PHI, POWER_SURFACE
+from tests.api.test_validation_budget import LONG_SUM, NESTED_PHI, POWER_SURFACE, REFUSED
 from tests.support import free_port, start_api, stop, wait_healthy
 
 pytestmark = pytest.mark.integration
@@ -31,16 +32,14 @@ with httpx.Client(base_url=sys.argv[1], timeout=30) as client:
         print(time.perf_counter() - start if ok else 99.0, flush=True)
         time.sleep(0.02)
 """
-BUDGET_S = 2.0
 #: Hang guards (not the target: bench/bench_validation.py measures /health's p99 against 100 ms).
-POST_GUARD_S = 60.0
-HEALTH_GUARD_S = 2.0
+POST_GUARD_S = 120.0
+HEALTH_GUARD_S = 30.0
 
 
-def test_expensive_expressions_answer_within_the_budget_and_health_stays_fast(tmp_path):
+def test_expensive_expressions_are_refused_by_their_measures_and_health_answers(tmp_path):
     port = free_port()
-    api = start_api(port, tmp_path / "api.log", {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false",
-                                                 "NONHOLONOMIC_VALIDATION_BUDGET_S": str(BUDGET_S)})
+    api = start_api(port, tmp_path / "api.log", {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false"})
     base = f"http://127.0.0.1:{port}"
     prober = None
     try:
@@ -66,14 +65,14 @@ def test_expensive_expressions_answer_within_the_budget_and_health_stays_fast(tm
         health_s = [float(line) for line in prober.communicate(timeout=10)[0].split()]
         prober = None
         for field, (r, seconds) in answers.items():
-            assert seconds < POST_GUARD_S, (field, seconds)
-            assert r.status_code in (202, 422), (field, r.status_code, r.text)
-            if r.status_code == 422:
+            assert seconds < POST_GUARD_S, (field, seconds)  # a hang guard
+            if field in REFUSED:
                 errors = {e["field"]: e["reason"] for e in r.json()["errors"]}
-                assert list(errors) == [field] and "too expensive to validate" in errors[field], errors
-        assert answers["poincare.surface"][0].status_code == 422  # 152 s on main: over any budget
+                assert r.status_code == 422 and list(errors) == [field] and REFUSED[field] in errors[field], errors
+            else:
+                assert r.status_code == 202, (field, r.status_code, r.text)
         assert len(health_s) >= 10, health_s
-        assert max(health_s) < HEALTH_GUARD_S, sorted(health_s)[-5:]
+        assert max(health_s) < HEALTH_GUARD_S, sorted(health_s)[-5:]  # every probe answered (99: an error)
     finally:
         if prober is not None:
             prober.kill()

@@ -239,8 +239,9 @@ def test_energy_with_d0_in_place_of_d_is_not_conserved():
 def test_density_is_proven_invariant_symbolically_and_rho_1_is_refuted(potential):
     # The system's own field and density, parameters symbolic: with the entries of A = B⁻¹ as the
     # symbols, n = A x/|A x| and ρ = |∇Φ| = 2 |A x| carry no determinant, and sympy proves
-    # div(ρ f) = 0 within the service's default budget (20 s; measured ≈ 1.8 s per potential in a
-    # fresh process, the old form in the entries of B with adj(B) and det B took 26-35 s).
+    # div(ρ f) = 0 within the default work limits (the bracket has ~3,000 operations, max_proof_ops
+    # 20,000; measured ≈ 1.8 s per potential in a fresh process, the old form in the entries of B with
+    # adj(B) and det B took 26-35 s).
     system = bq.define(potential)
     A_x = bq.A * bq.x
     assert system.measure.density == 2 * sp.sqrt(A_x.dot(A_x))

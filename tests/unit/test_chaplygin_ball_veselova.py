@@ -204,7 +204,7 @@ def test_density_is_the_papers_expression():
 def test_density_is_proven_invariant_on_all_of_R9(potential):
     # Measured: 1.3 s (zero) and 0.2 s (linear) for the symbolic proof.
     system = bv.define(potential)
-    proven, detail = symbolic_divergence_vanishes(system, budget_s=60)
+    proven, detail = symbolic_divergence_vanishes(system)
     assert proven is True, detail
     p = parameter_vector(system, params(potential))
     assert pointwise_divergence_residual(system, p, random_states(50)) <= 1e-13  # measured 1.8e-16
@@ -220,7 +220,7 @@ def test_a_wrong_density_fails_both_measure_checks(name, wrong_density):
     wrong = dataclasses.replace(right, measure=InvariantMeasure(wrong_density, name, "test"))
     p = parameter_vector(right, params("linear"))
     states = run("linear", 5.0, samples=40, checks=[]).trajectory.states
-    symbolic, pointwise = measure_evidence(wrong, p, states, budget_s=60)
+    symbolic, pointwise = measure_evidence(wrong, p, states)
     assert symbolic.passed is False, symbolic.detail
     assert pointwise.passed is False and pointwise.residual > 1e-3
     assert pointwise_divergence_residual(right, p, states) <= 1e-13

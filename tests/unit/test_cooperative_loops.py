@@ -37,7 +37,7 @@ def _within_guard(call):
     thread.start()
     thread.join(GUARD_S)
     if thread.is_alive():
-        pytest.fail(f"still running after {GUARD_S} s")
+        pytest.fail(f"hang guard: still running after {GUARD_S:g} s")
     if "error" in out:
         raise out["error"]  # type: ignore[misc]
     return out["value"]

@@ -30,8 +30,16 @@ I1, I2, I3, theta, phi, thetadot, phidot, x, y, z, e_var, E1, E2 = (S[n] for n i
 #: Hang guards, not results (speed is measured in bench/): every refusal (measured: < 1 ms each) and
 #: fuzzed parse finishes within this many seconds, even on a loaded machine.
 FAST_S = 5.0
-#: The slowest accepted 2000-character inputs (measured cold: 0.21-0.56 s on 2 quiet cores, 2.8 s at load 16).
-WORST_S = 15.0
+#: The slowest accepted 2000-character inputs (measured cold: 0.21-0.56 s on 2 quiet cores, 2.8 s at load
+#: 16): a hang guard, 100 times the quiet time.
+WORST_S = 60.0
+
+
+def _hang_guard(t0: float, limit_s: float, what: str) -> None:
+    """Fail if the work begun at ``t0`` took past ``limit_s``: a parse that never ends (the guards this
+    file tests stop them), not a speed (bench/ measures that)."""
+    took = time.perf_counter() - t0
+    assert took < limit_s, f"hang guard: {what} took {took:.1f} s (guard {limit_s:g} s)"
 
 
 def parse(text: str, **kw) -> sp.Expr:
@@ -42,7 +50,7 @@ def refuse(text: str, **kw) -> ExpressionError:
     t0 = time.perf_counter()
     with pytest.raises(ExpressionError) as info:
         parse(text, **kw)
-    assert time.perf_counter() - t0 < FAST_S
+    _hang_guard(t0, FAST_S, f"refusing {text[:40]!r}")
     return info.value
 
 
@@ -272,8 +280,9 @@ def test_resource_and_domain_guards(text, position, reason):
     assert (err.position, reason in err.reason) == (position, True), str(err)
 
 
-def test_worst_case_inputs_are_fast():
-    """Largest accepted inputs (2000 characters) whose constants sympy evaluates numerically."""
+def test_worst_case_inputs_are_accepted_and_end():
+    """Largest accepted inputs (2000 characters) whose constants sympy evaluates numerically: each is
+    parsed, within a wide hang guard (how fast is bench/'s)."""
     cases = [
         fill(f"sign(sin({k})**2 + cos({k})**2 - 1)" for k in range(1, 99)),  # evalf of exact zeros
         fill(f"cos(pi/{k})" for k in range(2, 400)),
@@ -285,7 +294,7 @@ def test_worst_case_inputs_are_fast():
         assert len(text) <= 2000
         t0 = time.perf_counter()
         parse(text)
-        assert time.perf_counter() - t0 < WORST_S, text[:40]
+        _hang_guard(t0, WORST_S, f"parsing {text[:40]!r}")
 
 
 def fill(terms, limit: int = 2000) -> str:
@@ -400,13 +409,13 @@ TOKENS = ["x", "y", "1", "2.5", "1e15", "+", "-", "*", "/", "**", "^", "(", ")",
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.sampled_from(TOKENS), max_size=25).map("".join) | st.text(max_size=30))
 def test_fuzz_only_expression_errors(text):
-    """Any text: a sympy Expr or an ExpressionError with a position inside the text, quickly."""
+    """Any text: a sympy Expr or an ExpressionError with a position inside the text (within a hang guard)."""
     t0 = time.perf_counter()
     try:
         assert isinstance(parse(text), sp.Expr)
     except ExpressionError as err:
         assert err.position is None or 0 <= err.position <= len(text)
-    assert time.perf_counter() - t0 < FAST_S
+    _hang_guard(t0, FAST_S, f"parsing {text!r}")
 
 
 def _expressions():

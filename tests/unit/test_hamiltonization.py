@@ -121,22 +121,33 @@ def test_pushforward_in_tau_is_the_hamiltonian_field_and_in_t_it_is_not(kind, po
 @pytest.mark.parametrize("kind,potential", CASES)
 def test_symbolic_identity_is_proven_with_parameters_symbolic(kind, potential):
     system = get_system(kind, potential)
-    proven, detail = symbolic_flow_identity(hamiltonian_form(system), system, budget_s=30.0)
+    proven, detail = symbolic_flow_identity(hamiltonian_form(system), system)
     print(f"{kind}/{potential}: {detail}")
     assert proven is True, detail
 
 
-def test_symbolic_proof_reports_undecided_when_out_of_budget():
+def test_symbolic_proof_past_max_proof_ops_is_undecided_with_the_limit_named():
+    """Decided by the size of what the proof works on, not by seconds: not tried, the same words every time."""
+    from nonholonomic.hamiltonization import _flow_size
+    from nonholonomic.work_limits import MAX_PROOF_OPS, WorkLimits
+
     system = get_system("veselova", "quadratic")
-    variant = dataclasses.replace(hamiltonian_form(system), formula="budget test")  # a fresh proof
-    proven, detail = symbolic_flow_identity(variant, system, budget_s=0.0)
-    assert proven is None and "did not finish" in detail
+    form = hamiltonian_form(system)
+    size = _flow_size(form, system)
+    assert 1 < size <= MAX_PROOF_OPS  # the default tries it (test_symbolic_identity_is_proven_...)
+    proven, detail = symbolic_flow_identity(form, system, WorkLimits(max_proof_ops=size - 1))
+    assert proven is None
+    assert detail == f"the symbolic proof not tried: {size:,} operations > max {size - 1:,} (max_proof_ops)"
+    items = hamiltonian_form_evidence(system, params("veselova", "quadratic"), trajectory("veselova", "quadratic"),
+                                      WorkLimits(max_proof_ops=1))
+    symbolic = next(e for e in items if e.method == "symbolic")
+    assert symbolic.passed is None and symbolic.detail.endswith("> max 1 (max_proof_ops)")
 
 
 @pytest.mark.parametrize("kind,potential", CASES)
 def test_evidence_items_pass_on_a_trajectory(kind, potential):
     system = get_system(kind, potential)
-    items = hamiltonian_form_evidence(system, params(kind, potential), trajectory(kind, potential), budget_s=30.0)
+    items = hamiltonian_form_evidence(system, params(kind, potential), trajectory(kind, potential))
     by_key = {(e.name, e.method): e for e in items}
     expected = {("hamiltonian_flow", "symbolic"), ("hamiltonian_flow", "pointwise"),
                 ("hamiltonian_flow_control", "pointwise"), ("energy_equals_hamiltonian", "pointwise"),
@@ -173,7 +184,7 @@ def test_errata_3_printed_multiplier_breaks_the_flow_and_sqrt_det_I_is_a_constan
     ratio = vectorize([printed.time_density / form.time_density], system.state_symbols + system.parameter_symbols)(X, p)
     print(f"ERRATA 3: printed N residual {residual:.3g}, N_printed/N varies by {ratio.max() / ratio.min() - 1:.3g}")
     assert residual >= 0.05 and ratio.max() / ratio.min() - 1 >= 0.05
-    proven, detail = symbolic_flow_identity(printed, system, budget_s=30.0)
+    proven, detail = symbolic_flow_identity(printed, system)
     assert proven is False, detail
 
 
@@ -185,7 +196,7 @@ def test_errata_4_opposite_sign_convention_gives_minus_the_field(kind):
     flipped = dataclasses.replace(form, bracket=dataclasses.replace(form.bracket, matrix=-form.bracket.matrix))
     p = params(kind, "linear")
     assert flow_residual(flipped, system, random_states(kind), p) == pytest.approx(2.0, rel=1e-12)
-    proven, detail = symbolic_flow_identity(flipped, system, budget_s=30.0)
+    proven, detail = symbolic_flow_identity(flipped, system)
     assert proven is False, detail
 
 

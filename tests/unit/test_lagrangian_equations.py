@@ -6,7 +6,6 @@ and every refusal names its field."""
 from __future__ import annotations
 
 import os
-import time
 
 import numpy as np
 import pytest
@@ -73,19 +72,50 @@ def test_particle_accelerations_agree_with_lagranges_method():
     check_against_lagranges_method(PARTICLE)
 
 
-def test_a_derivation_past_its_budget_or_failing_is_a_derivation_error(monkeypatch):
+def test_a_failing_derivation_is_a_derivation_error_and_one_past_the_safety_cap_a_failure_not_a_verdict(monkeypatch):
+    """No clock decides a derivation: sympy's failure is a DerivationError naming it; a derivation still
+    running at the safety cap raises SafetyCapExceeded (the job fails saying so) and goes on to its end."""
+    import threading
+
+    from nonholonomic import bounded
     from nonholonomic.lagrangian import DerivationError, equations
 
-    def slow(data):
-        time.sleep(0.5)
+    def fails(data):
         raise RuntimeError("never mind")
 
-    data = parse_system({"coordinates": ["x", "y"], "L": "(x_dot**2 + y_dot**2)/2 - x*y"})
-    monkeypatch.setattr(equations, "_derive", slow)
-    with pytest.raises(DerivationError, match="did not finish"):
-        derive(data, budget_s=0.05)
+    monkeypatch.setattr(equations, "_derive", fails)
     with pytest.raises(DerivationError, match="never mind"):
-        derive(data, budget_s=5.0)
+        derive(parse_system({"coordinates": ["x", "y"], "L": "(x_dot**2 + y_dot**2)/2 - x*y"}))
+    release = threading.Event()
+
+    def waits(data):
+        release.wait(60)
+        raise RuntimeError("released")
+
+    monkeypatch.setattr(equations, "_derive", waits)
+    cap = bounded.safety_cap_s()
+    bounded.set_safety_cap(0.05)
+    try:
+        with pytest.raises(bounded.SafetyCapExceeded, match="safety cap of 0.05 s"):
+            derive(parse_system({"coordinates": ["x", "y"], "L": "(x_dot**2 + y_dot**2)/2 - 2*x*y"}))
+    finally:
+        bounded.set_safety_cap(cap)
+        release.set()
+
+
+def test_the_elimination_path_is_chosen_by_the_work_not_the_clock(monkeypatch):
+    """An entry of the exact elimination past MAX_FRACTION_TERMS sends the system to the plain elimination,
+    with the measure named: the same path on every machine (Suslov's problem reaches 248 terms)."""
+    from nonholonomic.lagrangian import equations, fractions
+    from nonholonomic.systems.lagrangian_classics import CLASSICS
+
+    data = parse_system(CLASSICS["suslov"]["job"]["system"])
+    assert equations._derive(data)[3] is True
+    monkeypatch.setattr(fractions, "MAX_FRACTION_TERMS", 100)
+    _, lam, _, closed_form, why = equations._derive(data)
+    assert not closed_form and lam == () and "terms > max 100 (MAX_FRACTION_TERMS)" in why
+    monkeypatch.setattr(equations, "FRACTIONS_MAX_OPS", 10)
+    assert "operations > max 10 (FRACTIONS_MAX_OPS)" in equations._derive(data)[4]
 
 
 def numeric(eqs):
@@ -261,7 +291,7 @@ def test_the_projected_elimination_without_cancellation_equals_the_exact_one_on_
     data = parse_system(CLASSICS[name]["job"]["system"])
     exact = equations._derive_in_fractions(data)[0]
     monkeypatch.setattr(equations, "FRACTIONS_MAX_OPS", 0)
-    qddot, lam, _, closed_form = equations._derive(data)
+    qddot, lam, _, closed_form, _ = equations._derive(data)
     assert not closed_form and lam == ()
     args = (*data.q, *data.v)
     values = dict(data.parameter_values)

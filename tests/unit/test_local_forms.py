@@ -11,7 +11,6 @@ is right. The paper's printed misprints (ERRATA 2, 3, 7) are shown to fail.
 from __future__ import annotations
 
 import ast
-import time
 
 import numpy as np
 import pytest
@@ -350,9 +349,7 @@ def trajectories():
                                         ("chaplygin_ball", ["euler_hamiltonian", "euler_momenta"])])
 def test_local_forms_match_the_vector_forms_along_trajectories(trajectories, kind, names):
     result = trajectories[kind]
-    start = time.perf_counter()
     items = lf.local_form_evidence(result.system, result.parameters, result.trajectory.states)
-    assert time.perf_counter() - start < 10
     assert [i.name for i in items] == names
     for item in items:
         assert item.method == "pointwise" and item.tolerance == 1e-10

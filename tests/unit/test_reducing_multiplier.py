@@ -9,7 +9,6 @@ checked against the three-dimensional equations (2504-1) and (2604-1) before the
 from __future__ import annotations
 
 import json
-import time
 
 import mpmath
 import numpy as np
@@ -149,16 +148,12 @@ def test_theorem_1_holds_for_arbitrary_data_with_errata_6_and_its_own_convention
 @pytest.fixture(scope="module")
 def veselova():
     a1, a2, b = ves_coefficients(S_VES)
-    start = time.perf_counter()
-    result = hamiltonize(T_VES, Q, V, a1, a2, b, potential=U_VES, parameters=VALUES)
-    return result, time.perf_counter() - start
+    return hamiltonize(T_VES, Q, V, a1, a2, b, potential=U_VES, parameters=VALUES)
 
 
 @pytest.fixture(scope="module")
 def ball():
-    start = time.perf_counter()
-    result = hamiltonize(R_BALL, Q, V, A1_BALL, A2_BALL, B_BALL, parameters=VALUES)
-    return result, time.perf_counter() - start
+    return hamiltonize(R_BALL, Q, V, A1_BALL, A2_BALL, B_BALL, parameters=VALUES)
 
 
 def ratios(expr: sp.Expr, reference: sp.Expr, n: int = 6) -> np.ndarray:
@@ -167,7 +162,7 @@ def ratios(expr: sp.Expr, reference: sp.Expr, n: int = 6) -> np.ndarray:
 
 
 def test_veselova_multiplier_is_errata_3_and_S_bar_vanishes(veselova):
-    result, seconds = veselova
+    result = veselova
     assert result.measure_exists is True and result.reason == ""
     assert result.S_bar == 0 and result.B == 0
     N = result.reducing_multiplier
@@ -193,11 +188,10 @@ def test_veselova_multiplier_is_errata_3_and_S_bar_vanishes(veselova):
     v = result.verification
     assert v["passed"] is True and v["method"] == "symbolic" and v["residual"] < 1e-30
     assert v["pointwise_residual_brackets_py_convention"] > 0.1
-    assert seconds < 15
 
 
 def test_ball_multiplier_is_rho_mu_and_S_bar_is_N_B_as_in_eq_007(ball):
-    result, seconds = ball
+    result = ball
     assert result.measure_exists is True
     N = result.reducing_multiplier
     r = ratios(N, RHO_MU)
@@ -210,7 +204,6 @@ def test_ball_multiplier_is_rho_mu_and_S_bar_is_N_B_as_in_eq_007(ball):
     assert np.ptp(spread) > 1e-2 * np.mean(spread)
     v = result.verification
     assert v["passed"] is True and v["method"] == "symbolic" and v["residual"] < 1e-30
-    assert seconds < 25
 
 
 def hamiltonian_errata_7(N: sp.Expr, pt: sp.Symbol, pp: sp.Symbol, printed: bool = False) -> sp.Expr:
@@ -229,7 +222,7 @@ def hamiltonian_errata_7(N: sp.Expr, pt: sp.Symbol, pp: sp.Symbol, printed: bool
 
 
 def test_ball_hamiltonian_is_errata_7_not_the_printed_one(ball):
-    result, _ = ball
+    result = ball
     pt, pp = result.momenta
     scale = ratios(result.reducing_multiplier, RHO_MU)[0]  # N = scale · ρ_μ, p_ours = scale · p_paper
     ours = result.hamiltonian.subs({pt: scale * pt, pp: scale * pp})
@@ -245,7 +238,7 @@ def test_ball_hamiltonian_is_errata_7_not_the_printed_one(ball):
 
 def test_ball_hamiltonian_flow_reproduces_the_trajectory_in_theorem_1_convention(ball):
     """Integrate eq. (2704-7) in t and the Hamiltonian system in τ; compare at equal t (dτ = N dt)."""
-    result, _ = ball
+    result = ball
     pt, pp = result.momenta
     N = result.reducing_multiplier.subs(VALUES)
     L = R_BALL.subs(VALUES)
@@ -297,21 +290,25 @@ def test_monopole_charge_of_known_forms():
 
 
 def test_large_forms_are_not_given_to_sympys_integrate(ball):
-    """sympy's integrate does not return on the ball's S_bar; a thread past its budget cannot be
-    stopped and slowed every later computation of the process 5-fold (measured), so it is not started."""
+    """sympy's integrate does not return on the ball's S_bar, and a thread cannot be stopped (it slowed
+    every later computation of the process 5-fold, measured): decided by the form's size, it is not started."""
     from nonholonomic import bounded
+    from nonholonomic.monopole import SYMBOLIC_INTEGRAL_MAX_OPS
 
-    result, _ = ball
-    out = monopole_charge(result.S_bar, Q, SPHERE, VALUES, symbolic_budget_s=5.0)
-    assert "not attempted" in out["detail"] and "symbolic" not in out
+    result = ball
+    out = monopole_charge(result.S_bar, Q, SPHERE, VALUES)
+    ops = sp.count_ops(result.S_bar)
+    assert ops > SYMBOLIC_INTEGRAL_MAX_OPS and "symbolic" not in out
+    assert out["detail"].endswith(f"; sympy's exact integral not tried: {ops:,} operations > max "
+                                  f"{SYMBOLIC_INTEGRAL_MAX_OPS} (SYMBOLIC_INTEGRAL_MAX_OPS)")
     assert not [k for k, t in bounded._tasks.items() if "_symbolic_area_integral" in str(k) and not t.done.is_set()]
 
 
 def test_ball_gyroscopic_form_is_not_exact_for_c_nonzero(ball):
-    result, _ = ball
+    result = ball
     S_bar, N = result.S_bar, result.reducing_multiplier
     scale = ratios(N, RHO_MU)[0]
-    chart = monopole_charge(S_bar, Q, SPHERE, VALUES, symbolic_budget_s=0)
+    chart = monopole_charge(S_bar, Q, SPHERE, VALUES, symbolic=False)
     # the chart integral of S̄ is non-zero, but S̄ dθ∧dφ is not a smooth form on S²: at the pole
     # S̄/sinθ depends on φ (unless I₁ = I₂) because p_φ is not a smooth fibre coordinate
     near_pole = sp.lambdify((th, ph), (S_bar / st).subs(VALUES), modules="numpy")
@@ -327,7 +324,7 @@ def test_ball_gyroscopic_form_is_not_exact_for_c_nonzero(ball):
     lhs = (RHO_MU * scale) * M - c * N * GAMMA - L_of_p.subs({pt: p_of[0], pp: p_of[1] - W2})
     f = sp.lambdify((th, ph, thd, phd), lhs.subs(VALUES), modules="numpy")
     assert max(np.max(np.abs(np.asarray(f(*x), dtype=float))) for x in points(4)) < 1e-12
-    smooth = monopole_charge(S_bar, Q, SPHERE, VALUES, shift=(0, W2), symbolic_budget_s=0)
+    smooth = monopole_charge(S_bar, Q, SPHERE, VALUES, shift=(0, W2), symbolic=False)
     expected = -4 * np.pi * VALUES[c] * scale / np.sqrt(VALUES[I1] * VALUES[I2] * VALUES[I3])
     assert abs(smooth["integral"] - expected) < 1e-9 * abs(expected), (smooth["integral"], expected)
     assert smooth["exact"] is False and chart["exact"] is False
@@ -338,7 +335,7 @@ def test_ball_gyroscopic_form_is_not_exact_for_c_nonzero(ball):
         tiny = mpmath.mpf("1e-7")
         assert abs(fixed(tiny, 0) - fixed(tiny, mpmath.pi / 2)) < 1e-9
     # c = 0: no gyroscopic forces, exact
-    zero = monopole_charge(S_bar, Q, SPHERE, {**VALUES, c: 0.0}, symbolic_budget_s=0)
+    zero = monopole_charge(S_bar, Q, SPHERE, {**VALUES, c: 0.0}, symbolic=False)
     assert zero["integral"] == 0.0 and zero["exact"] is True
     print(f"ball monopole: chart integral of S_bar {chart['integral']:.10f}, smooth form {smooth['integral']:.10f} "
           f"= -4 pi c / sqrt(det I) = {expected:.10f}")
@@ -401,14 +398,40 @@ def test_a_density_that_is_no_product_of_powers_is_integrated_and_proved():
     assert result.verification["method"] == "symbolic" and result.verification["passed"] is True
 
 
-def test_a_zero_budget_leaves_the_measure_undecided():
-    J1 = sp.Symbol("J1", positive=True)  # a fresh name: nothing cached from the other tests
-    a1, a2, b = (x.subs(I1, J1) for x in ves_coefficients(S_VES))
-    start = time.perf_counter()
-    result = hamiltonize(T_VES.subs(I1, J1), Q, V, a1, a2, b, budget_s=0.0)
-    assert time.perf_counter() - start < 10
-    assert result.measure_exists is None and "budget" in result.reason
-    assert result.reducing_multiplier is None and result.verification["passed"] is None
+def test_proofs_past_max_proof_ops_leave_the_measure_undecided_with_the_limit_named():
+    """Decided by sizes, not seconds: with max_proof_ops = 1 neither the ansatz nor the closedness proof
+    is tried, and with max_integrate_ops = 0 the line integral is left unevaluated; the measure is
+    undecided, only the pointwise check verifies the flow, and every reason names its limit: the same
+    words on every call (the default limits decide it: the veselova fixture)."""
+    from nonholonomic.work_limits import WorkLimits
+
+    a1, a2, b = ves_coefficients(S_VES)
+    limits = WorkLimits(max_proof_ops=1, max_integrate_ops=0)
+    result = hamiltonize(T_VES, Q, V, a1, a2, b, limits=limits)
+    assert result.measure_exists is None
+    assert result.reason.startswith("undecided: zero at 8 random points")
+    assert "; symbolic proof not tried: " in result.reason and result.reason.endswith(" > max 1 (max_proof_ops)")
+    assert result.density.has(sp.Integral)
+    method = result.equations["density_method"]
+    assert "left as an integral (sympy's integrate not tried: " in method and "> max 0 (max_integrate_ops)" in method
+    assert "not proved symbolically: its proof not tried: " in method and method.endswith("> max 1 (max_proof_ops)")
+    v = result.verification
+    assert v["method"] == "pointwise" and v["symbolic"] is None and v["passed"] is True
+    again = hamiltonize(T_VES, Q, V, a1, a2, b, limits=limits)
+    assert again.to_json() == result.to_json()
+
+
+def test_a_line_integral_past_max_integrate_ops_is_left_unevaluated():
+    """The density of A = (-sin q1, q2 cos q1) without sympy's integrate on the integrand: an unevaluated
+    integral (the same function), and the reason says which limit kept it so."""
+    from nonholonomic.work_limits import WorkLimits
+
+    result = hamiltonize((q1d**2 + q2d**2) / 2, (q1, q2), (q1d, q2d), -sp.sin(q1), q2 * sp.cos(q1), sp.Integer(1),
+                         limits=WorkLimits(max_integrate_ops=0))
+    assert result.measure_exists is True  # the closedness proof is within max_proof_ops
+    assert result.density.has(sp.Integral)
+    method = result.equations["density_method"]
+    assert "left as an integral (sympy's integrate not tried: " in method and "> max 0 (max_integrate_ops)" in method
 
 
 def test_a_density_with_floor_from_a_periodic_antiderivative_is_verified():
@@ -420,7 +443,7 @@ def test_a_density_with_floor_from_a_periodic_antiderivative_is_verified():
 
     s = declare_symbols(["x", "y", "a", "b"])
     result = hamiltonize(parse_expression("(a**2 + (2 + cos(x))*b**2)/2", s), (s["x"], s["y"]), (s["a"], s["b"]),
-                         parse_expression("2", s), parse_expression("0.25", s), parse_expression("2", s), None, {},
-                         budget_s=5.0).to_json()
+                         parse_expression("2", s), parse_expression("0.25", s), parse_expression("2", s), None,
+                         {}).to_json()
     assert "floor" in result["density"]
     assert result["verification"]["passed"] is True and result["verification"]["residual"] < 1e-30

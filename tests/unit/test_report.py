@@ -4,10 +4,12 @@ asserted, misprinted claims among them; changing a formula in the core changes t
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 import sympy as sp
 
+from nonholonomic import bounded
 from nonholonomic import local_forms as lf
 from nonholonomic.report import claim_ids, paper_report
 from nonholonomic.report.verdict import CORRECTED, FAILS, HOLDS, UNRESOLVED, Check, judge
@@ -80,6 +82,36 @@ def test_a_broken_check_is_an_unresolved_row_not_a_crashed_report(monkeypatch):
     monkeypatch.setattr(lf, "veselova_gyroscopic_term", broken)
     (row,) = paper_report(only=["veselova.S"])["rows"]
     assert row["verdict"] == UNRESOLVED and "ZeroDivisionError: boom" in row["checks"][0]["detail"]
+
+
+def test_a_safety_cap_fails_the_report_and_is_no_row(monkeypatch):
+    """A proof past the machine's safety cap is a failure of the run, not a finding about the claim."""
+    def capped() -> sp.Expr:
+        raise bounded.SafetyCapExceeded("rational_trig_is_zero", 0.05)
+
+    monkeypatch.setattr(lf, "veselova_gyroscopic_term", capped)
+    with pytest.raises(bounded.SafetyCapExceeded):
+        paper_report(only=["veselova.S"])
+
+
+def _without_timings(value: object) -> object:
+    """``value`` without its timing fields (``seconds``): what must be the same on every run."""
+    if isinstance(value, dict):
+        return {k: _without_timings(v) for k, v in value.items() if k != "seconds"}
+    if isinstance(value, list):
+        return [_without_timings(v) for v in value]
+    return value
+
+
+def test_the_same_report_twice_is_the_same_but_for_its_timings(report):
+    """Verdicts and details are decided by the question and the code, never by a clock: no detail holds
+    a time, and a second run (its proofs cached) gives the same JSON but for the ``seconds`` fields."""
+    text = json.dumps(_without_timings(report))
+    assert not re.search(r"\d \(?s\)|\d s\b|within the budget|budget exhausted", text), \
+        re.findall(r".{60}(?:\d \(?s\)|\d s\b|budget).{20}", text)[:5]
+    ids = ["ball.bracket", "ball.S_bar", "general.theorem_1", "veselova.theorem_2", "jacobi.measure"]
+    again = paper_report(only=ids)
+    assert _without_timings(again["rows"]) == _without_timings([r for r in report["rows"] if r["id"] in ids])
 
 
 def test_judge():

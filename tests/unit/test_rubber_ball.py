@@ -147,8 +147,26 @@ def test_final_state_matches_independent_dop853(potential):
 
 @pytest.mark.parametrize("potential", sorted(POTENTIALS))
 def test_density_is_proven_invariant(potential):
-    proven, detail = symbolic_divergence_vanishes(rb.define(potential), budget_s=60)
+    proven, detail = symbolic_divergence_vanishes(rb.define(potential))
     assert proven is True, detail
+
+
+def test_a_proof_past_max_proof_ops_is_undecided_naming_the_limit_and_the_pointwise_check_stays():
+    """Decided by the bracket's size, not by seconds: not tried, in the same words on every call."""
+    from nonholonomic.evidence.measure import divergence_bracket
+    from nonholonomic.work_limits import WorkLimits, operations
+
+    system = rb.define("zero")
+    size = operations(divergence_bracket(system, system.measure.density))
+    small = WorkLimits(max_proof_ops=size - 1)
+    proven, detail = symbolic_divergence_vanishes(system, limits=small)
+    assert proven is None
+    assert detail == f"div(rho f)/rho: the symbolic proof not tried: {size:,} operations > max {size - 1:,} (max_proof_ops)"
+    p = parameter_vector(system, {"inertia": INERTIA, "D": D})
+    symbolic, pointwise = measure_evidence(system, p, run("zero", 5.0, samples=40, checks=[]).trajectory.states,
+                                           limits=small)
+    assert symbolic.passed is None and symbolic.detail.startswith(detail)
+    assert pointwise.passed is True
 
 
 def test_density_is_the_balls_density_at_E_equal_gamma_over_sqrt_det_J():
@@ -166,7 +184,7 @@ def test_a_wrong_density_fails_both_measure_checks(name, wrong_density):
     wrong = dataclasses.replace(right, measure=InvariantMeasure(wrong_density, name, "test"))
     p = parameter_vector(right, {"inertia": INERTIA, "D": D})
     states = run("zero", 5.0, samples=40, checks=[]).trajectory.states
-    symbolic, pointwise = measure_evidence(wrong, p, states, budget_s=60)
+    symbolic, pointwise = measure_evidence(wrong, p, states)
     assert symbolic.passed is False and pointwise.passed is False and pointwise.residual > 1e-3
     assert pointwise_divergence_residual(right, p, states) <= 1e-13
 
