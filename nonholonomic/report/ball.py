@@ -50,7 +50,7 @@ def theorem_1() -> Row:
                   "time-substituted system is Hamiltonian with the bracket (2704-9)", "Theorem 1, 2704-8, 2704-9",
                   printed="S_bar = B(q)", corrected="S_bar = N(q) B(q); the flow is dx/dtau = {x, H_bar}",
                   errata="ERRATA 6, 14")
-    from nonholonomic.reducing_multiplier import prove_theorem_1
+    from nonholonomic.theorem_1 import prove_theorem_1
 
     right, printed = prove_theorem_1("N*B"), prove_theorem_1("B")
     return Row(claim, [proof(*right)], printed_check=proof(*printed))

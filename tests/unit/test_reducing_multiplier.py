@@ -17,7 +17,8 @@ import sympy as sp
 from scipy.integrate import solve_ivp
 
 from nonholonomic.brackets import generalized_chaplygin_bracket
-from nonholonomic.reducing_multiplier import hamiltonize, monopole_charge, prove_theorem_1
+from nonholonomic.reducing_multiplier import hamiltonize, monopole_charge
+from nonholonomic.theorem_1 import prove_theorem_1
 
 th, ph = sp.symbols("theta phi", real=True)
 thd, phd, psd = sp.symbols("thetadot phidot psidot", real=True)
