@@ -195,6 +195,7 @@ def define(data: LagrangianData, reduce: bool = True, generic: bool = False) -> 
 
 
 @lru_cache(maxsize=64)
+@remembered("outline")  # keyed by its inputs: its field is a DAG that a key by content would print as a tree
 def outline(data: LagrangianData) -> MechanicalSystem:
     """What a request for ``data`` is checked against, in milliseconds: every name, integral and constraint
     of :func:`define` (without ``reduce``), the field by :func:`~nonholonomic.lagrangian.equations.plain_field`
