@@ -170,8 +170,15 @@ class _Sampler:
         substituting floats into sympy would round every intermediate to 15 digits)."""
         names = self.symbols
         exprs = [_without_step_derivatives(e) for e in exprs]
+        # an unevaluated line integral (a density left as ∫) is one quadrature per point, shared by
+        # every expression that holds it (N, p = N ∂L/∂q̇ and their derivatives), not one per occurrence
+        integrals = sorted({i for e in exprs if isinstance(e, sp.Basic) for i in e.atoms(sp.Integral)}, key=sp.srepr)
+        held = [sp.Dummy(f"integral_{k}") for k in range(len(integrals))]
+        exprs = [e.xreplace(dict(zip(integrals, held))) if isinstance(e, sp.Basic) else e for e in exprs]
+        inputs = list(args) + list(names)
         try:
-            fn = sp.lambdify(list(args) + list(names), list(exprs), modules="mpmath")
+            fn = sp.lambdify(inputs + held, list(exprs), modules="mpmath")
+            fn_integrals = sp.lambdify(inputs, integrals, modules="mpmath")
         except Exception as exc:  # sympy cannot print it as code (an unevaluated special function ...)
             raise ValueError(f"an expression derived from the input cannot be evaluated numerically: "
                              f"{type(exc).__name__}: {str(exc).splitlines()[0]}") from None
@@ -179,7 +186,8 @@ class _Sampler:
 
         def evaluate(*x: float) -> list[Any]:
             with mpmath.workdps(DIGITS):
-                return [mpmath.mpmathify(r) for r in fn(*[mpmath.mpf(v) for v in list(x) + values])]
+                point = [mpmath.mpf(v) for v in list(x) + values]
+                return [mpmath.mpmathify(r) for r in fn(*point, *(fn_integrals(*point) if held else ()))]
 
         return evaluate
 

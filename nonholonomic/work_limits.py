@@ -26,7 +26,7 @@ MAX_PROOF_OPS = 20_000
 MAX_INTEGRATE_OPS = 60
 #: Largest expression (sympy operations) that is cancelled and simplified for display or reuse
 #: (larger ones are kept as they are: equal, only not shortened).
-MAX_TIDY_OPS = 4000
+MAX_TIDY_OPS = 2000
 
 
 @dataclass(frozen=True)

@@ -109,7 +109,9 @@ def _fingerprint_code(**_: Any) -> None:
 
 @worker_process_init.connect
 def _warm_up(**_: Any) -> None:
-    """A pool process compiles every integrator before it takes jobs, then says it is warm."""
+    """A pool process opens the memo on disk (what another process derived is read back, not derived
+    again), compiles every integrator before it takes jobs (unless ``warm_up`` is off), then says it
+    is warm."""
     from workers.heartbeat import process_key
 
     _heartbeats.clear()  # copies of the main process's, inherited by the fork: not ours to stop
@@ -118,6 +120,9 @@ def _warm_up(**_: Any) -> None:
     if job_store.cache_info().currsize:  # the main process's engine, inherited: its connections are not ours
         job_store().engine.dispose(close=False)
     _open_job_store()
+    from workers.disk_memo import install_from_settings
+
+    install_from_settings()  # symbolic results remembered across processes, with or without a warm-up
     if get_settings().warm_up:
         from workers.jobs import warm_up
 

@@ -109,13 +109,26 @@ def limit_request_threads(app: FastAPI) -> None:
     anyio.to_thread.current_default_thread_limiter().total_tokens = tokens
 
 
+_frozen = False
+
+
+def _freeze_start_up() -> None:
+    """Collect, then move what start-up made out of the garbage collector's full collections: once per
+    process (a second app in the same process, as in the tests, finds it done; a full collection of
+    a large heap costs a second)."""
+    global _frozen
+    if not _frozen:
+        _frozen = True
+        gc.collect()
+        gc.freeze()
+
+
 @contextlib.asynccontextmanager
 async def lifespan(app: FastAPI) -> AsyncIterator[None]:
     """Start the monitor (the app's lifespan made the backend already), bound the request threads and
     freeze what start-up made out of the garbage collector's full collections."""
     limit_request_threads(app)
-    gc.collect()
-    gc.freeze()
+    _freeze_start_up()
     monitor = app.state.health_monitor = HealthMonitor(app.state.backend)
     task = asyncio.create_task(monitor.run(), name="health-monitor")
     try:
@@ -125,7 +138,6 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         with contextlib.suppress(asyncio.CancelledError):
             await task
         monitor.close()
-        gc.unfreeze()
 
 
 router = APIRouter(tags=["health"], generate_unique_id_function=operation_id, lifespan=lifespan)

@@ -219,7 +219,7 @@ def test_too_small_limits_leave_the_verdicts_undecided_naming_the_limit(client):
 
 @pytest.mark.parametrize("limits,field", [({"max_proof_ops": 200_001}, "limits.max_proof_ops"),
                                           ({"max_integrate_ops": -1}, "limits.max_integrate_ops"),
-                                          ({"max_tidy_ops": 40_001}, "limits.max_tidy_ops"),
+                                          ({"max_tidy_ops": 20_001}, "limits.max_tidy_ops"),
                                           ({"max_seconds": 1}, "limits.max_seconds")])
 def test_limits_outside_their_bounds_are_422(client, limits, field):
     r = client.post("/v1/brackets/verify", json={**SO3, "limits": limits})

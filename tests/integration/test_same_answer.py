@@ -3,9 +3,9 @@
 Heavy requests (the rattleback, the tilted Suslov problem, Veselova's system and Chaplygin's sphere from their
 Lagrangians, a hamiltonize and a bracket request) are sent three times: to an embedded API with empty caches
 while busy processes load both cores, to a queue-mode API with a real Celery worker and empty caches on a
-quiet machine, and to that API again (warm caches). Every answer (the job's status, error and result; the
-symbolic routes' JSON) is compared with the timing fields removed (:func:`schemas.results.without_timing`):
-they must be identical, byte for byte.
+quiet machine, and to that API again (warm caches: what one pool process derived, the other reads back).
+Every answer (the job's status, error and result; the symbolic routes' JSON) is compared with the timing
+fields removed (:func:`schemas.results.without_timing`): they must be identical, byte for byte.
 """
 
 from __future__ import annotations
@@ -123,15 +123,22 @@ def test_heavy_requests_get_identical_answers_loaded_and_quiet_cold_and_warm_emb
             stop(api)
     # 2. queue mode (the API, a real Celery worker, Redis, PostgreSQL), empty caches, quiet; 3. again, warm
     queue, database = f"same-{uuid.uuid4().hex[:8]}", fresh_database_url()
-    env = {"NONHOLONOMIC_QUEUE": queue, "DATABASE_URL": database, "NONHOLONOMIC_WARM_UP": "false",
-           "NONHOLONOMIC_CACHE_DIR": str(tmp_path / "cache-quiet")}
+    env = {"NONHOLONOMIC_QUEUE": queue, "DATABASE_URL": database, "NONHOLONOMIC_WARM_UP": "false"}
     port = free_port()
-    api = start_api(port, tmp_path / "api.log", {"REDIS_URL": TEST_REDIS_URL, **env})
-    worker = start_worker(TEST_REDIS_URL, queue, tmp_path / "worker.log", concurrency=2, extra_env=env)
+    api = start_api(port, tmp_path / "api.log", {"REDIS_URL": TEST_REDIS_URL, **env,
+                                                 "NONHOLONOMIC_CACHE_DIR": str(tmp_path / "cache-api")})
+    worker_cache = tmp_path / "cache-worker"  # the worker's own, to see what its pool processes keep
+    worker = start_worker(TEST_REDIS_URL, queue, tmp_path / "worker.log", concurrency=2,
+                          extra_env={**env, "NONHOLONOMIC_CACHE_DIR": str(worker_cache)})
     try:
         wait_healthy(f"http://127.0.0.1:{port}", timeout=180)
         quiet = _answers(f"http://127.0.0.1:{port}")
+        derived = sorted(p.name for p in worker_cache.glob("*.memo"))
         warm = _answers(f"http://127.0.0.1:{port}")
+        # the worker's pool processes keep what they derived (without a warm-up too), and the warm run,
+        # whichever process takes each job, reads it back: nothing is derived again
+        assert len(derived) > 10, derived
+        assert sorted(p.name for p in worker_cache.glob("*.memo")) == derived
     except Exception:
         print("\n".join((tmp_path / f).read_text()[-4000:] for f in ("api.log", "worker.log")))
         raise
