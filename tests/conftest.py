@@ -46,9 +46,10 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:  # ty
 
 #: The files that take longest (minutes, mostly waiting on the processes they start), run first: with
 #: pytest-xdist handing out whole files, a long file started last would be the whole suite's tail.
-LONGEST_FIRST = ("integration/test_faults.py", "integration/test_durability.py", "integration/test_partition.py",
-                 "integration/test_redis_outage.py", "integration/test_worker_soft_limit.py", "unit/test_report.py",
-                 "integration/test_processes.py", "integration/test_worker_recycling.py")
+LONGEST_FIRST = ("integration/test_same_answer.py", "integration/test_faults.py", "integration/test_durability.py",
+                 "integration/test_partition.py", "integration/test_tutorials.py", "browser/test_pages.py",
+                 "integration/test_redis_outage.py", "integration/test_processes.py",
+                 "integration/test_worker_recycling.py", "integration/test_worker_soft_limit.py", "unit/test_report.py")
 
 
 def pytest_collection_modifyitems(config, items) -> None:  # type: ignore[no-untyped-def]

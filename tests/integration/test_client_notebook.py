@@ -1,6 +1,6 @@
 """The client as a researcher uses it in a notebook: results as xarray and pandas objects equal to the
-JSON bit for bit, a progress bar in simulated time, and the client installed alone (``pip install
-'./client[notebook]'`` into a fresh venv: httpx, numpy, pandas, xarray, tqdm; no server package).
+JSON bit for bit, a progress bar in simulated time (the client installed alone, running the tutorials:
+tests/integration/test_tutorials.py).
 
 One embedded API process for the module (no Redis).
 """
@@ -8,17 +8,13 @@ One embedded API process for the module (no Redis).
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
-import venv
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
 from nonholonomic_client import Client
-from tests.support import ROOT, embedded_api
+from tests.support import embedded_api
 
 pytestmark = pytest.mark.integration
 
@@ -32,10 +28,6 @@ ENSEMBLE = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D"
             "members": {"sample": {"count": 5, "seed": 3, "level": {"energy": 1.0, "area": 0.0}}},
             "t_final": 60.0, "poincare": {"surface": "gamma3", "coordinates": ["M1", "M2"]},
             "lyapunov": {"count": 2}}
-#: Distributions the client must not bring (the server's stack).
-SERVER_DISTRIBUTIONS = ("heyoka", "sympy", "celery", "fastapi", "sqlalchemy", "uvicorn", "redis", "scipy",
-                        "matplotlib", "alembic", "psycopg", "nonholonomic")
-
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory) -> Iterator[str]:
@@ -177,43 +169,3 @@ def test_wait_with_progress_draws_a_bar_in_simulated_seconds(api, capsys):
     err = capsys.readouterr().err
     last = err.replace("\r", "\n").strip().splitlines()[-1]
     assert job_id[:8] in last and "50/50 s" in last and "succeeded" in last, err[-500:]
-
-
-def test_the_client_installs_alone_and_runs_the_tutorials_calls(base, tmp_path):
-    """``pip install './client[notebook]'`` into a fresh venv: none of the server's stack comes with it,
-    and every client call of the notebook tutorials (their cells not tagged ``plot``) runs from there
-    against the served API, not from the repository."""
-    env_dir = tmp_path / "venv"
-    venv.EnvBuilder(with_pip=True).create(env_dir)
-    python = env_dir / "bin" / "python"
-    install = subprocess.run([str(python), "-m", "pip", "install", "-q", f"{ROOT / 'client'}[notebook]"],
-                             capture_output=True, text=True, timeout=900, check=False)
-    assert install.returncode == 0, install.stderr[-3000:]
-    inventory = f"""
-import importlib.metadata as md, importlib.util, json
-names = sorted(d.metadata["Name"].lower() for d in md.distributions())
-tops = [m for m in ("service", "schemas", "store", "workers", "client", "nonholonomic") if importlib.util.find_spec(m)]
-print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r} if n in names], "tops": tops}}))
-"""
-    run = subprocess.run([str(python), "-c", inventory], capture_output=True, text=True, timeout=120, check=False,
-                         cwd=tmp_path)  # not the repository: its folders must not be what is imported
-    assert run.returncode == 0, run.stderr[-3000:]
-    out = json.loads(run.stdout.strip().splitlines()[-1])
-    assert out["server"] == [] and out["tops"] == [], out
-    assert {"httpx", "numpy", "pandas", "xarray", "tqdm", "nonholonomic-client"} <= set(out["names"])
-    assert "matplotlib" not in out["names"] and "ipykernel" not in out["names"]
-    calls = subprocess.run([sys.executable, str(ROOT / "scripts" / "tutorials.py"), "--client-calls"],
-                           capture_output=True, text=True, timeout=120, check=True).stdout
-    (tmp_path / "calls.py").write_text(calls)
-    run = subprocess.run([str(python), "calls.py"], capture_output=True, text=True, timeout=600, check=False,
-                         cwd=tmp_path, env={**os.environ, "NONHOLONOMIC_URL": base})
-    assert run.returncode == 0, run.stderr[-3000:]
-    done = [line for line in run.stdout.splitlines() if line.endswith(".ipynb")]  # each one's name, once run
-    assert done == [p.name for p in sorted((ROOT / "docs" / "tutorials").glob("*.ipynb"))] and len(done) == 7, done
-    cli = env_dir / "bin" / "nonholonomic"
-    systems = subprocess.run([str(cli), "--url", base, "systems"], capture_output=True, text=True, timeout=60,
-                             check=False, cwd=tmp_path)
-    assert systems.returncode == 0 and "chaplygin_ball" in systems.stdout, systems.stderr
-    serve = subprocess.run([str(cli), "serve"], capture_output=True, text=True, timeout=60, check=False,
-                           cwd=tmp_path)
-    assert serve.returncode == 2 and "needs the server" in serve.stderr and "pip install -e ." in serve.stderr

@@ -1,14 +1,20 @@
-"""The notebook tutorials (``docs/tutorials/*.ipynb``) executed top to bottom against a live embedded
-API, each in a fresh Jupyter kernel, by ``scripts/tutorials.py`` (what a maintainer runs with
-``--write`` to store their outputs for the docs). The notebooks assert their own numbers (drifts,
-the spectrum's sum against the measure, a verdict), so a change that breaks the physics or the client
-fails here."""
+"""The notebook tutorials (``docs/tutorials/*.ipynb``) run as a researcher runs them: from a fresh venv
+holding only the client (``pip install './client[notebook]'``: httpx, numpy, pandas, xarray, tqdm; none
+of the server's stack), then Jupyter and matplotlib, each notebook top to bottom in a fresh kernel of
+that venv against a live embedded API, by ``scripts/tutorials.py`` (what a maintainer runs with
+``--write`` to store their outputs for the docs). The notebooks assert their own numbers (drifts, the
+spectrum's sum against the measure, a verdict), so a change that breaks the physics or the client
+fails here. The cells not tagged ``plot`` need nothing beyond the client: every module they import is
+imported in the venv before Jupyter and matplotlib are added."""
 
 from __future__ import annotations
 
+import ast
+import json
 import subprocess
-import sys
+import venv
 from collections.abc import Iterator
+from pathlib import Path
 
 import nbformat
 import pytest
@@ -18,6 +24,11 @@ from tests.support import ROOT, embedded_api
 pytestmark = pytest.mark.integration
 
 TUTORIALS = sorted((ROOT / "docs" / "tutorials").glob("*.ipynb"))
+#: Distributions the client must not bring (the server's stack).
+SERVER_DISTRIBUTIONS = ("heyoka", "sympy", "celery", "fastapi", "sqlalchemy", "uvicorn", "redis", "scipy",
+                        "matplotlib", "alembic", "psycopg", "nonholonomic")
+#: What a notebook adds to the client: a kernel, the runner and the plots.
+NOTEBOOK_TOOLS = ("ipykernel", "nbclient", "nbformat", "matplotlib")
 
 
 @pytest.fixture(scope="module")
@@ -34,16 +45,66 @@ def test_there_are_the_seven_tutorials_the_docs_list():
     assert all(f"tutorials/{p.name}" in nav for p in TUTORIALS)
 
 
-def test_every_tutorial_runs_against_a_live_server(base, tmp_path):
-    run = subprocess.run([sys.executable, str(ROOT / "scripts" / "tutorials.py"), "--url", base, "--out", str(tmp_path)],
-                         capture_output=True, text=True, timeout=1200, check=False)
+def _client_cell_imports() -> list[str]:
+    """The top-level modules imported by the tutorials' cells not tagged ``plot``."""
+    found: set[str] = set()
+    for path in TUTORIALS:
+        for cell in nbformat.read(path, as_version=4).cells:
+            if cell.cell_type != "code" or "plot" in cell.metadata.get("tags", []):
+                continue
+            for node in ast.walk(ast.parse(cell.source)):
+                if isinstance(node, ast.Import):
+                    found |= {a.name.split(".")[0] for a in node.names}
+                elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                    found.add(node.module.split(".")[0])
+    return sorted(found)
+
+
+def _run(args: list[str], cwd: Path, timeout: float = 900) -> subprocess.CompletedProcess:
+    """A command in ``cwd`` (not the repository: its folders must not be what is imported)."""
+    return subprocess.run(args, capture_output=True, text=True, timeout=timeout, check=False, cwd=cwd)
+
+
+def test_the_client_installs_alone_and_every_tutorial_runs_from_it(base, tmp_path):
+    env_dir = tmp_path / "venv"
+    venv.EnvBuilder(with_pip=True).create(env_dir)
+    python = str(env_dir / "bin" / "python")
+    install = _run([python, "-m", "pip", "install", "-q", f"{ROOT / 'client'}[notebook]"], tmp_path)
+    assert install.returncode == 0, install.stderr[-3000:]
+    inventory = f"""
+import importlib.metadata as md, importlib.util, json
+names = sorted(d.metadata["Name"].lower() for d in md.distributions())
+tops = [m for m in ("service", "schemas", "store", "workers", "client", "nonholonomic") if importlib.util.find_spec(m)]
+print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r} if n in names], "tops": tops}}))
+"""
+    run = _run([python, "-c", inventory], tmp_path, timeout=120)
+    assert run.returncode == 0, run.stderr[-3000:]
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    assert out["server"] == [] and out["tops"] == [], out
+    assert {"httpx", "numpy", "pandas", "xarray", "tqdm", "nonholonomic-client"} <= set(out["names"])
+    assert "matplotlib" not in out["names"] and "ipykernel" not in out["names"]
+    modules = _client_cell_imports()
+    assert "nonholonomic_client" in modules and "matplotlib" not in modules, modules
+    run = _run([python, "-c", f"import importlib; [importlib.import_module(m) for m in {modules!r}]"], tmp_path, 120)
+    assert run.returncode == 0, run.stderr[-3000:]
+    cli = str(env_dir / "bin" / "nonholonomic")
+    systems = _run([cli, "--url", base, "systems"], tmp_path, timeout=60)
+    assert systems.returncode == 0 and "chaplygin_ball" in systems.stdout, systems.stderr
+    serve = _run([cli, "serve"], tmp_path, timeout=60)
+    assert serve.returncode == 2 and "needs the server" in serve.stderr and "pip install -e ." in serve.stderr
+
+    install = _run([python, "-m", "pip", "install", "-q", *NOTEBOOK_TOOLS], tmp_path)
+    assert install.returncode == 0, install.stderr[-3000:]
+    executed = tmp_path / "executed"
+    run = _run([python, str(ROOT / "scripts" / "tutorials.py"), "--url", base, "--out", str(executed)], tmp_path,
+               timeout=1200)
     assert run.returncode == 0, run.stderr[-4000:]
     assert [line.split()[1] for line in run.stdout.splitlines() if line.startswith("ok ")] == [p.name for p in TUTORIALS]
     for path in TUTORIALS:
-        book = nbformat.read(tmp_path / path.name, as_version=4)
+        book = nbformat.read(executed / path.name, as_version=4)
         outputs = [o for c in book.cells if c.cell_type == "code" for o in c.outputs]
         assert not [o for o in outputs if o.output_type == "error"], path.name
         assert any(o.output_type == "execute_result" for o in outputs), path.name
-    section = nbformat.read(tmp_path / "section-and-exponents.ipynb", as_version=4)
+    section = nbformat.read(executed / "section-and-exponents.ipynb", as_version=4)
     pictures = [o for c in section.cells for o in getattr(c, "outputs", []) if "image/png" in o.get("data", {})]
     assert len(pictures) == 2  # the section and the running estimates, drawn
