@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -102,6 +104,31 @@ def embedded_api(logs: Path, env: Mapping[str, str] | None = None) -> Iterator[s
         raise
     finally:
         stop(api)
+
+
+class HangGuard(AssertionError):
+    """A test's work did not end within its hang guard (a failure of the test, never its result)."""
+
+
+@contextlib.contextmanager
+def hang_guard(seconds: float, what: str) -> Iterator[None]:
+    """Interrupt the block if it runs past ``seconds`` (SIGALRM: a parse or loop that never ends fails
+    with :class:`HangGuard` instead of holding the suite); nothing is measured or asserted when it ends
+    in time. Outside the main thread (no signals there) the block runs unguarded."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):  # type: ignore[no-untyped-def]
+        raise HangGuard(f"hang guard: {what} still running after {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, interrupt)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def wait_until(predicate, timeout: float, what: str, interval: float = 0.1) -> None:

@@ -18,7 +18,15 @@ import httpx
 import pytest
 
 from service.security import DOCS_POLICY, EXPLORE_POLICY, PAGE_POLICY, SVG_POLICY
-from tests.support import ROOT, free_port, poll_job, start_api, stop, wait_healthy
+from tests.support import (
+    ROOT,
+    free_port,
+    hang_guard,
+    poll_job,
+    start_api,
+    stop,
+    wait_healthy,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -312,9 +320,9 @@ def _until(page, expression: str, timeout: float = GUARD_S) -> float:
     """Seconds until ``expression`` is true in the page (polled every 10 ms: ``wait_for_function`` evaluates a
     string, which the page's CSP refuses); ``timeout`` is a hang guard."""
     start = time.perf_counter()
-    while not page.evaluate(expression):
-        assert time.perf_counter() - start < timeout, f"hang guard: not within {timeout:g} s: {expression}"
-        page.wait_for_timeout(10)
+    with hang_guard(timeout, f"waiting for {expression}"):
+        while not page.evaluate(expression):
+            page.wait_for_timeout(10)
     return time.perf_counter() - start
 
 

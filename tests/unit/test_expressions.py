@@ -5,7 +5,6 @@ from __future__ import annotations
 import io
 import math
 import pickle
-import time
 import tokenize
 from pathlib import Path
 
@@ -23,23 +22,17 @@ from nonholonomic.expressions import (
     parse_expression,
     parse_matrix,
 )
+from tests.support import hang_guard
 
 NAMES = ["I1", "I2", "I3", "theta", "phi", "thetadot", "phidot", "x", "y", "z", "e", "E1", "E2"]
 S = declare_symbols(NAMES)
 I1, I2, I3, theta, phi, thetadot, phidot, x, y, z, e_var, E1, E2 = (S[n] for n in NAMES)
-#: Hang guards, not results (speed is measured in bench/): every refusal (measured: < 1 ms each) and
-#: fuzzed parse finishes within this many seconds, even on a loaded machine.
+#: Hang guards, not results (speed is measured in bench/): a refusal (measured: < 1 ms each) or fuzzed
+#: parse still running after this many seconds is interrupted (:func:`tests.support.hang_guard`).
 FAST_S = 5.0
 #: The slowest accepted 2000-character inputs (measured cold: 0.21-0.56 s on 2 quiet cores, 2.8 s at load
 #: 16): a hang guard, 100 times the quiet time.
 WORST_S = 60.0
-
-
-def _hang_guard(t0: float, limit_s: float, what: str) -> None:
-    """Fail if the work begun at ``t0`` took past ``limit_s``: a parse that never ends (the guards this
-    file tests stop them), not a speed (bench/ measures that)."""
-    took = time.perf_counter() - t0
-    assert took < limit_s, f"hang guard: {what} took {took:.1f} s (guard {limit_s:g} s)"
 
 
 def parse(text: str, **kw) -> sp.Expr:
@@ -47,10 +40,8 @@ def parse(text: str, **kw) -> sp.Expr:
 
 
 def refuse(text: str, **kw) -> ExpressionError:
-    t0 = time.perf_counter()
-    with pytest.raises(ExpressionError) as info:
+    with hang_guard(FAST_S, f"refusing {text[:40]!r}"), pytest.raises(ExpressionError) as info:
         parse(text, **kw)
-    _hang_guard(t0, FAST_S, f"refusing {text[:40]!r}")
     return info.value
 
 
@@ -292,9 +283,8 @@ def test_worst_case_inputs_are_accepted_and_end():
     ]
     for text in cases:
         assert len(text) <= 2000
-        t0 = time.perf_counter()
-        parse(text)
-        _hang_guard(t0, WORST_S, f"parsing {text[:40]!r}")
+        with hang_guard(WORST_S, f"parsing {text[:40]!r}"):
+            parse(text)
 
 
 def fill(terms, limit: int = 2000) -> str:
@@ -410,12 +400,11 @@ TOKENS = ["x", "y", "1", "2.5", "1e15", "+", "-", "*", "/", "**", "^", "(", ")",
 @given(st.lists(st.sampled_from(TOKENS), max_size=25).map("".join) | st.text(max_size=30))
 def test_fuzz_only_expression_errors(text):
     """Any text: a sympy Expr or an ExpressionError with a position inside the text (within a hang guard)."""
-    t0 = time.perf_counter()
-    try:
-        assert isinstance(parse(text), sp.Expr)
-    except ExpressionError as err:
-        assert err.position is None or 0 <= err.position <= len(text)
-    _hang_guard(t0, FAST_S, f"parsing {text!r}")
+    with hang_guard(FAST_S, f"parsing {text!r}"):
+        try:
+            assert isinstance(parse(text), sp.Expr)
+        except ExpressionError as err:
+            assert err.position is None or 0 <= err.position <= len(text)
 
 
 def _expressions():
