@@ -178,7 +178,7 @@ class _Sampler:
         inputs = list(args) + list(names)
         try:
             fn = sp.lambdify(inputs + held, list(exprs), modules="mpmath")
-            fn_integrals = sp.lambdify(inputs, integrals, modules="mpmath")
+            fn_integrals = sp.lambdify(inputs, integrals, modules="mpmath") if held else None
         except Exception as exc:  # sympy cannot print it as code (an unevaluated special function ...)
             raise ValueError(f"an expression derived from the input cannot be evaluated numerically: "
                              f"{type(exc).__name__}: {str(exc).splitlines()[0]}") from None
@@ -187,7 +187,8 @@ class _Sampler:
         def evaluate(*x: float) -> list[Any]:
             with mpmath.workdps(DIGITS):
                 point = [mpmath.mpf(v) for v in list(x) + values]
-                return [mpmath.mpmathify(r) for r in fn(*point, *(fn_integrals(*point) if held else ()))]
+                shared = fn_integrals(*point) if fn_integrals is not None else ()
+                return [mpmath.mpmathify(r) for r in fn(*point, *shared)]
 
         return evaluate
 
