@@ -165,7 +165,7 @@ def part_b(shape: int, T: float, concurrencies: list[int]) -> None:
         queue = f"bench-map-{uuid.uuid4().hex[:8]}"
         env = {"NONHOLONOMIC_JOB_TTL_S": "3600", "NONHOLONOMIC_MAX_T_FINAL": "1e6"}
         worker = start_worker(REDIS_URL, queue, logs / f"worker{concurrency}.log", concurrency=concurrency,
-                              extra_env=env)
+                              extra_env=env, warm_up=True)
         port = free_port()
         api = start_api(port, logs / f"api{concurrency}.log", {"REDIS_URL": REDIS_URL, "NONHOLONOMIC_QUEUE": queue,
                                                                **env})

@@ -161,7 +161,7 @@ def queue_mode(n: int, logs: Path) -> tuple[Latencies, str]:
     posted: list[str] = []
     try:
         worker = start_worker(REDIS_URL, queue, logs / "worker.log", concurrency=1,
-                              extra_env={"NONHOLONOMIC_JOB_TTL_S": JOB_TTL_S})
+                              extra_env={"NONHOLONOMIC_JOB_TTL_S": JOB_TTL_S}, warm_up=True)
         api = start_api(port, logs / "api-queue.log", env)
         start = time.perf_counter()
         wait_healthy(base, timeout=180.0)

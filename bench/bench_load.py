@@ -303,7 +303,7 @@ def main() -> int:
     logs = Path(tempfile.mkdtemp(prefix="bench-load-"))
     port = free_port()
     worker = start_worker(REDIS_URL, queue, logs / "worker.log", concurrency=2,
-                          extra_env={k: v for k, v in env.items() if k != "REDIS_URL"})
+                          extra_env={k: v for k, v in env.items() if k != "REDIS_URL"}, warm_up=True)
     api = start_api(port, logs / "api.log", env)
     store = probe = None
     try:

@@ -71,7 +71,7 @@ def with_workers(concurrency: int, bodies: list[dict[str, Any]], logs: Path) -> 
     """Start an API and a worker with ``concurrency`` processes, warm them, run ``bodies`` in turn."""
     queue = f"bench-scale-{uuid.uuid4().hex[:8]}"
     worker = start_worker(REDIS_URL, queue, logs / f"worker{concurrency}.log", concurrency=concurrency,
-                          extra_env={"NONHOLONOMIC_JOB_TTL_S": "3600"})
+                          extra_env={"NONHOLONOMIC_JOB_TTL_S": "3600"}, warm_up=True)
     port = free_port()
     api = start_api(port, logs / f"api{concurrency}.log", {"REDIS_URL": REDIS_URL, "NONHOLONOMIC_QUEUE": queue,
                                                            "NONHOLONOMIC_JOB_TTL_S": "3600"})

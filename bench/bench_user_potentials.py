@@ -105,7 +105,7 @@ def worker_memory(jobs: int, max_memory_mib: int) -> list[str]:
     logs = Path(tempfile.mkdtemp(prefix="bench-memory-"))
     worker = start_worker(redis_url, queue, logs / "worker.log", concurrency=2,
                           extra_env={"NONHOLONOMIC_DATABASE_URL": database,
-                                     "NONHOLONOMIC_WORKER_MAX_MEMORY_MIB": str(max_memory_mib)})
+                                     "NONHOLONOMIC_WORKER_MAX_MEMORY_MIB": str(max_memory_mib)}, warm_up=True)
     store = JobStore(database, 3600)
     sender = Celery(broker=redis_url, backend=redis_url)
     samples: list[tuple[int, dict[int, float]]] = []

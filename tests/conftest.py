@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections import Counter
 
 import pytest
 from hypothesis import settings
@@ -44,24 +45,21 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config) -> None:  # ty
             terminalreporter.write_line(str(key)[:200])
 
 
-#: The files that take longest (minutes, mostly waiting on the processes they start), run first: with
-#: pytest-xdist handing out whole files, a long file started last would be the whole suite's tail.
-LONGEST_FIRST = ("integration/test_same_answer.py", "integration/test_faults.py", "integration/test_durability.py",
-                 "integration/test_partition.py", "integration/test_tutorials.py", "browser/test_pages.py",
-                 "integration/test_redis_outage.py", "integration/test_processes.py",
-                 "integration/test_worker_recycling.py", "integration/test_worker_soft_limit.py", "unit/test_report.py")
+#: The two longest files (minutes each, one test or three), handed out first: after them pytest-xdist's
+#: order, the files of most tests first (the in-process unit files, which fill heyoka's disk cache before
+#: the integration files start their servers). Last, either one was the suite's tail.
+FIRST = ("integration/test_same_answer.py", "integration/test_tutorials.py")
 
 
 def pytest_collection_modifyitems(config, items) -> None:  # type: ignore[no-untyped-def]
-    """Longest files first (:data:`LONGEST_FIRST`), then the other integration files, then the rest in
-    their order (a stable sort)."""
+    """The files of :data:`FIRST`, then the others by their number of tests, most first (a stable sort;
+    scripts/test.py passes ``--no-loadscope-reorder`` so that pytest-xdist keeps this order)."""
+    counts = Counter(item.nodeid.split("::")[0] for item in items)
 
-    def rank(item) -> int:  # type: ignore[no-untyped-def]
+    def rank(item) -> tuple[int, int]:  # type: ignore[no-untyped-def]
         path = item.nodeid.split("::")[0]
-        for i, name in enumerate(LONGEST_FIRST):
-            if path.endswith(name):
-                return i
-        return len(LONGEST_FIRST) + (0 if "/integration/" in path else 1)
+        first = [i for i, name in enumerate(FIRST) if path.endswith(name)]
+        return (first[0], 0) if first else (len(FIRST), -counts[path])
 
     items.sort(key=rank)
 

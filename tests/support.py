@@ -74,9 +74,12 @@ def _env(extra: Mapping[str, str]) -> dict[str, str]:
 
 
 def start_worker(redis_url: str, queue: str, log: Path, concurrency: int = 1,
-                 extra_env: Mapping[str, str] | None = None) -> subprocess.Popen:
-    """A real Celery worker process (prefork pool) consuming ``queue``."""
-    env = _env({"REDIS_URL": redis_url, "NONHOLONOMIC_QUEUE": queue, **(extra_env or {})})
+                 extra_env: Mapping[str, str] | None = None, warm_up: bool = False) -> subprocess.Popen:
+    """A real Celery worker process (prefork pool) consuming ``queue``; its pool processes compile every
+    system before their first job only with ``warm_up`` (~2 s of CPU each with warm caches: a test's
+    jobs compile the one system they use)."""
+    env = _env({"REDIS_URL": redis_url, "NONHOLONOMIC_QUEUE": queue, "NONHOLONOMIC_WARM_UP": str(warm_up).lower(),
+                **(extra_env or {})})
     cmd = [str(BIN / "celery"), "-A", "workers.celery_app:app", "worker", "-Q", queue, "--pool", "prefork",
            "--concurrency", str(concurrency), "--loglevel", "INFO", "--hostname", f"{queue}@%h", "--without-gossip",
            "--without-mingle"]
@@ -158,12 +161,16 @@ def stop(proc: subprocess.Popen) -> None:
             proc.wait(5)
 
 
-def poll_job(client: httpx.Client, location: str, timeout: float = 60.0, interval: float = 0.002) -> dict:
-    """Poll a job until it is terminal; returns its last view."""
+def poll_job(client: httpx.Client, location: str, timeout: float = 60.0, interval: float = 0.002,
+             max_interval: float = 0.1) -> dict:
+    """Poll a job until it is terminal; returns its last view. The wait between polls starts at
+    ``interval`` and doubles up to ``max_interval``: a quick job is seen at once, and a long one is not
+    asked hundreds of times a second (each poll is CPU taken from the job, and in-process the GIL)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         view = client.get(location).json()
         if view["status"] in ("succeeded", "failed", "cancelled"):
             return view
         time.sleep(interval)
+        interval = min(2 * interval, max(interval, max_interval))
     raise TimeoutError(f"job {location} not finished after {timeout:g} s")

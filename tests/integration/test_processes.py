@@ -81,7 +81,7 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, s
                    GUARD_S, "/health to see the compiling worker (a hang guard)")
         compiling = seen[-1]
         store.delete(cold)
-        worker = start_worker(TEST_REDIS_URL, queue, logs / "worker.log", extra_env=LIMITS)
+        worker = start_worker(TEST_REDIS_URL, queue, logs / "worker.log", extra_env=LIMITS, warm_up=True)
         wait_healthy(base, timeout=600)  # a hang guard: the worker's warm-up is ~35 s cold on 2 quiet cores
         with httpx.Client(base_url=base, timeout=10) as client:
             client.before_worker = (no_worker, compiling)  # type: ignore[attr-defined]

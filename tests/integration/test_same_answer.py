@@ -1,11 +1,13 @@
 """Issue 31: the same request gets the same answer, whatever the load, the caches or the mode.
 
 Heavy requests (the rattleback, the tilted Suslov problem, Veselova's system and Chaplygin's sphere from their
-Lagrangians, a hamiltonize and a bracket request) are sent three times: to an embedded API with empty caches
-while busy processes load both cores, to a queue-mode API with a real Celery worker and empty caches on a
-quiet machine, and to that API again (warm caches: what one pool process derived, the other reads back).
-Every answer (the job's status, error and result; the symbolic routes' JSON) is compared with the timing
-fields removed (:func:`schemas.results.without_timing`): they must be identical, byte for byte.
+Lagrangians, a hamiltonize and a bracket request) are sent three times: to a queue-mode API with a real Celery
+worker (two pool processes) and empty caches while busy processes load both cores, to that API again on a
+quiet machine (warm caches: what one pool process derived, the other reads back), and to an embedded API with
+empty caches on a quiet machine. Every answer (the job's status, error and result; the symbolic routes' JSON)
+is compared with the timing fields removed (:func:`schemas.results.without_timing`): they must be identical,
+byte for byte. (The loaded run is the queue's: its two pool processes derive side by side, so the busy loops
+spin for half as long as beside the embedded API's one job thread.)
 """
 
 from __future__ import annotations
@@ -108,20 +110,8 @@ def _diff(a: Any, b: Any, path: str = "") -> list[str]:
 def test_heavy_requests_get_identical_answers_loaded_and_quiet_cold_and_warm_embedded_and_queue(tmp_path: Path):
     if not redis_available():
         pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
-    # 1. embedded mode, empty caches, both cores loaded by other processes
-    port = free_port()
-    with _busy():
-        api = start_api(port, tmp_path / "embedded.log", {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false",
-                                                          "NONHOLONOMIC_CACHE_DIR": str(tmp_path / "cache-loaded")})
-        try:
-            wait_healthy(f"http://127.0.0.1:{port}", timeout=180)
-            loaded = _answers(f"http://127.0.0.1:{port}")
-        except Exception:
-            print((tmp_path / "embedded.log").read_text()[-4000:])
-            raise
-        finally:
-            stop(api)
-    # 2. queue mode (the API, a real Celery worker, Redis, PostgreSQL), empty caches, quiet; 3. again, warm
+    # 1. queue mode (the API, a real Celery worker with two pool processes, Redis, PostgreSQL), empty
+    # caches, both cores loaded by other processes; 2. again, quiet and warm
     queue, database = f"same-{uuid.uuid4().hex[:8]}", fresh_database_url()
     env = {"NONHOLONOMIC_QUEUE": queue, "DATABASE_URL": database, "NONHOLONOMIC_WARM_UP": "false"}
     port = free_port()
@@ -132,7 +122,8 @@ def test_heavy_requests_get_identical_answers_loaded_and_quiet_cold_and_warm_emb
                           extra_env={**env, "NONHOLONOMIC_CACHE_DIR": str(worker_cache)})
     try:
         wait_healthy(f"http://127.0.0.1:{port}", timeout=180)
-        quiet = _answers(f"http://127.0.0.1:{port}")
+        with _busy():  # from the first request to the last answer
+            loaded = _answers(f"http://127.0.0.1:{port}")
         derived = sorted(p.name for p in worker_cache.glob("*.memo"))
         warm = _answers(f"http://127.0.0.1:{port}")
         # the worker's pool processes keep what they derived (without a warm-up too), and the warm run,
@@ -146,6 +137,18 @@ def test_heavy_requests_get_identical_answers_loaded_and_quiet_cold_and_warm_emb
         stop(worker)
         stop(api)
         drop_database(database)
+    # 3. embedded mode (jobs in the API's own thread), empty caches, quiet
+    port = free_port()
+    api = start_api(port, tmp_path / "embedded.log", {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false",
+                                                      "NONHOLONOMIC_CACHE_DIR": str(tmp_path / "cache-embedded")})
+    try:
+        wait_healthy(f"http://127.0.0.1:{port}", timeout=180)
+        quiet = _answers(f"http://127.0.0.1:{port}")
+    except Exception:
+        print((tmp_path / "embedded.log").read_text()[-4000:])
+        raise
+    finally:
+        stop(api)
     assert list(loaded) == list(quiet) == list(warm)
     for name in loaded:
         assert loaded[name] == quiet[name], (name, _diff(loaded[name], quiet[name])[:10])
