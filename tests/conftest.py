@@ -55,11 +55,11 @@ def pytest_collection_modifyitems(config, items) -> None:  # type: ignore[no-unt
     """The files of :data:`FIRST`, then the others by their number of tests, most first (a stable sort;
     scripts/test.py passes ``--no-loadscope-reorder`` so that pytest-xdist keeps this order)."""
     counts = Counter(item.nodeid.split("::")[0] for item in items)
+    first = {name: i for i, name in enumerate(FIRST)}
 
     def rank(item) -> tuple[int, int]:  # type: ignore[no-untyped-def]
         path = item.nodeid.split("::")[0]
-        first = [i for i, name in enumerate(FIRST) if path.endswith(name)]
-        return (first[0], 0) if first else (len(FIRST), -counts[path])
+        return first.get(path.removeprefix("tests/"), len(FIRST)), -counts[path]
 
     items.sort(key=rank)
 

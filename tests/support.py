@@ -172,5 +172,5 @@ def poll_job(client: httpx.Client, location: str, timeout: float = 60.0, interva
         if view["status"] in ("succeeded", "failed", "cancelled"):
             return view
         time.sleep(interval)
-        interval = min(2 * interval, max(interval, max_interval))
+        interval = max(interval, min(2 * interval, max_interval))
     raise TimeoutError(f"job {location} not finished after {timeout:g} s")

@@ -6,8 +6,8 @@ worker (two pool processes) and empty caches while busy processes load both core
 quiet machine (warm caches: what one pool process derived, the other reads back), and to an embedded API with
 empty caches on a quiet machine. Every answer (the job's status, error and result; the symbolic routes' JSON)
 is compared with the timing fields removed (:func:`schemas.results.without_timing`): they must be identical,
-byte for byte. (The loaded run is the queue's: its two pool processes derive side by side, so the busy loops
-spin for half as long as beside the embedded API's one job thread.)
+byte for byte. (The loaded run is the queue's: its two pool processes derive side by side, where the embedded
+API has one job thread, and the busy loops spin only while the answers are computed.)
 """
 
 from __future__ import annotations
