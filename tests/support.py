@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import os
 import signal
@@ -36,6 +37,36 @@ def fresh_database_url() -> str:
     return url.set(database=f"{url.database}_{uuid.uuid4().hex[:10]}").render_as_string(hide_password=False)
 
 
+#: Databases named by :func:`queue_database_url` in this process (dropped by :func:`drop_queue_databases`).
+_QUEUE_DATABASES: set[str] = set()
+
+
+def queue_database_url(queue: str) -> str:
+    """The job store of the stack (API and workers) on ``queue``: a PostgreSQL database of its own, named
+    after the queue, so that no other test's sweep, listing or cancellation reaches its jobs (an API with
+    keys lists and may cancel every job without an owner in its store). Created by the first
+    ``JobStore.migrate``; dropped when this process exits (:func:`drop_queue_databases`)."""
+    from sqlalchemy.engine import make_url
+
+    url = make_url(TEST_DATABASE_URL)
+    name = "".join(c if c.isalnum() else "_" for c in queue.lower())
+    rendered = url.set(database=f"{url.database}_q_{name}"[:63]).render_as_string(hide_password=False)
+    if not _QUEUE_DATABASES:
+        atexit.register(drop_queue_databases)
+    _QUEUE_DATABASES.add(rendered)
+    return rendered
+
+
+def drop_queue_databases() -> None:
+    """Drop the databases this process named with :func:`queue_database_url` (at its exit: its stacks
+    are stopped, or their connections are ended)."""
+    while _QUEUE_DATABASES:
+        try:
+            drop_database(_QUEUE_DATABASES.pop())
+        except Exception:  # noqa: BLE001 - PostgreSQL away (a test stopped it): left for the next run
+            pass
+
+
 def drop_database(url: str) -> None:
     from sqlalchemy import create_engine, text
     from sqlalchemy.engine import make_url
@@ -61,12 +92,14 @@ def free_port() -> int:
 
 
 def _env(extra: Mapping[str, str]) -> dict[str, str]:
-    """The environment of a started process: ours without the service's settings, then ``extra``; an
-    embedded job store of its own (a fresh folder) unless ``extra`` names one."""
+    """The environment of a started process: ours without the service's settings, then ``extra``; a job
+    store of its own unless ``extra`` names one: a fresh folder (embedded), the queue's own database
+    (queue mode, :func:`queue_database_url`)."""
     env = {k: v for k, v in os.environ.items()
            if not k.startswith("NONHOLONOMIC_") and k not in ("REDIS_URL", "DATABASE_URL")}
     env["NONHOLONOMIC_DATA_DIR"] = tempfile.mkdtemp(prefix="nonholonomic-store-")
-    env["NONHOLONOMIC_DATABASE_URL"] = TEST_DATABASE_URL if extra.get("REDIS_URL") else ""
+    env["NONHOLONOMIC_DATABASE_URL"] = \
+        queue_database_url(extra.get("NONHOLONOMIC_QUEUE", "nonholonomic")) if extra.get("REDIS_URL") else ""
     # the suite starts ~60 APIs, most never asked a symbolic question: their fork servers start on demand
     env["NONHOLONOMIC_SYMBOLIC_PRESTART"] = "false"
     env.update(extra)

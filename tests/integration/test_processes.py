@@ -1,11 +1,13 @@
 """The real thing: the API under uvicorn, a Celery worker process, Redis; and embedded mode likewise.
 
-Needs Redis on 127.0.0.1:6379 (the README's test command starts one). Uses Redis DB 15 and a
-queue of its own, so a running deployment is not disturbed.
+Needs Redis on 127.0.0.1:6379 (the README's test command starts one). Uses Redis DB 13 (emptied before
+and after), a queue and a job store of its own, so neither a running deployment nor the other test files
+are disturbed.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import uuid
 from collections.abc import Iterator
@@ -15,15 +17,13 @@ import httpx
 import numpy as np
 import pytest
 import redis
-
 from celery import Celery
 
 from tests.reference import ball_reference
 from tests.support import (
-    TEST_DATABASE_URL,
-    TEST_REDIS_URL,
     free_port,
     poll_job,
+    queue_database_url,
     redis_available,
     start_api,
     start_worker,
@@ -33,6 +33,10 @@ from tests.support import (
 )
 
 pytestmark = pytest.mark.integration
+
+#: A Redis database of this file's own (it empties it before and after): the other files' stacks share
+#: tests.support.TEST_REDIS_URL while they run beside it.
+REDIS_URL = os.environ.get("NONHOLONOMIC_TEST_PROCESSES_REDIS_URL", "redis://127.0.0.1:6379/13")
 
 BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7,
                    "potential": {"kind": "brun", "k": 0.4}},
@@ -56,9 +60,9 @@ def _dump_logs(logs: Path) -> str:
 
 @pytest.fixture(scope="module")
 def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, str]]:
-    if not redis_available():
-        pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
-    store = redis.Redis.from_url(TEST_REDIS_URL)
+    if not redis_available(REDIS_URL):
+        pytest.fail(f"no Redis at {REDIS_URL}: run the README's test command, which starts one")
+    store = redis.Redis.from_url(REDIS_URL)
     store.flushdb()
     logs = tmp_path_factory.mktemp("queue-logs")
     queue = f"test-{uuid.uuid4().hex[:8]}"
@@ -67,7 +71,7 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, s
     # before it (no worker; a worker still compiling) are set up here rather than raced for.
     from workers.heartbeat import PREFIX
 
-    api = start_api(port, logs / "api.log", {"REDIS_URL": TEST_REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS})
+    api = start_api(port, logs / "api.log", {"REDIS_URL": REDIS_URL, "NONHOLONOMIC_QUEUE": queue, **LIMITS})
     worker = None
     base = f"http://127.0.0.1:{port}"
     try:
@@ -81,7 +85,7 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, s
                    GUARD_S, "/health to see the compiling worker (a hang guard)")
         compiling = seen[-1]
         store.delete(cold)
-        worker = start_worker(TEST_REDIS_URL, queue, logs / "worker.log", extra_env=LIMITS, warm_up=True)
+        worker = start_worker(REDIS_URL, queue, logs / "worker.log", extra_env=LIMITS, warm_up=True)
         wait_healthy(base, timeout=600)  # a hang guard: the worker's warm-up is ~35 s cold on 2 quiet cores
         with httpx.Client(base_url=base, timeout=10) as client:
             client.before_worker = (no_worker, compiling)  # type: ignore[attr-defined]
@@ -134,7 +138,7 @@ def test_health_reads_the_heartbeats_and_names_no_host(queue_stack):
 
 
 def test_job_runs_on_the_worker_and_matches_an_independent_reference(queue_stack):
-    client, store, _ = queue_stack
+    client, store, queue = queue_stack
     r = client.post("/v1/jobs", json=BODY)
     assert r.status_code == 202
     # The first job may wait for the worker's warm-up (every system compiled: ~35 s with a cold
@@ -149,7 +153,7 @@ def test_job_runs_on_the_worker_and_matches_an_independent_reference(queue_stack
     assert all(c["passed"] for c in result["checks"])
     from store.jobs import JobStore
 
-    stored = JobStore(TEST_DATABASE_URL, 600)
+    stored = JobStore(queue_database_url(queue), 600)
     assert stored.get(view["id"]).result == result  # the job store (PostgreSQL) holds the result ...
     meta = store.get(f"celery-task-meta-{view['id']}")
     assert meta is None or len(meta) < 1000  # ... and Redis, the broker, does not
@@ -161,7 +165,7 @@ def test_a_job_the_worker_refuses_is_reported_failed_with_its_reason(queue_stack
     client, store, queue = queue_stack
     job_id = str(uuid.uuid4())
     bad = {**BODY, "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.0, 3.0]}}
-    sender = Celery(broker=TEST_REDIS_URL, backend=TEST_REDIS_URL)
+    sender = Celery(broker=REDIS_URL, backend=REDIS_URL)
     sender.send_task("nonholonomic.simulate", args=[bad], task_id=job_id, queue=queue)
     view = poll_job(client, f"/v1/jobs/{job_id}", timeout=GUARD_S)
     assert view["status"] == "failed" and view["result"] is None
