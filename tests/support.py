@@ -98,8 +98,9 @@ def _env(extra: Mapping[str, str]) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items()
            if not k.startswith("NONHOLONOMIC_") and k not in ("REDIS_URL", "DATABASE_URL")}
     env["NONHOLONOMIC_DATA_DIR"] = tempfile.mkdtemp(prefix="nonholonomic-store-")
-    env["NONHOLONOMIC_DATABASE_URL"] = \
-        queue_database_url(extra.get("NONHOLONOMIC_QUEUE", "nonholonomic")) if extra.get("REDIS_URL") else ""
+    named = "DATABASE_URL" in extra or "NONHOLONOMIC_DATABASE_URL" in extra
+    env["NONHOLONOMIC_DATABASE_URL"] = "" if named or not extra.get("REDIS_URL") else \
+        queue_database_url(extra.get("NONHOLONOMIC_QUEUE", "nonholonomic"))
     # the suite starts ~60 APIs, most never asked a symbolic question: their fork servers start on demand
     env["NONHOLONOMIC_SYMBOLIC_PRESTART"] = "false"
     env.update(extra)

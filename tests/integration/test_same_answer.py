@@ -2,9 +2,10 @@
 
 Heavy requests (the rattleback, the tilted Suslov problem, Veselova's system and Chaplygin's sphere from their
 Lagrangians, a hamiltonize and a bracket request) are sent three times: to a queue-mode API with a real Celery
-worker (two pool processes) and empty caches while busy processes load both cores, to that API again on a
-quiet machine (warm caches: what one pool process derived, the other reads back), and to an embedded API with
-empty caches on a quiet machine. Every answer (the job's status, error and result; the symbolic routes' JSON)
+worker (two pool processes) and empty caches while busy processes load both cores (at the lowest priority:
+in the suite, the other test processes are the load), to that API again on a quiet machine (warm caches:
+what one pool process derived, the other reads back), and to an embedded API with empty caches on a quiet
+machine. Every answer (the job's status, error and result; the symbolic routes' JSON)
 is compared with the timing fields removed (:func:`schemas.results.without_timing`): they must be identical,
 byte for byte. (The loaded run is the queue's: its two pool processes derive side by side, where the embedded
 API has one job thread, and the busy loops spin only while the answers are computed.)
@@ -88,8 +89,12 @@ def _answers(base: str) -> dict[str, Any]:
 
 @contextmanager
 def _busy(count: int = 2) -> Iterator[None]:
-    """``count`` processes spinning on a core each (the machine's load, not the test's work)."""
-    loops = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
+    """``count`` processes spinning on a core each (the machine's load, not the test's work), at the lowest
+    priority (nice 19): run alone, this test's answers are computed beside them on two busy cores; in the
+    suite, where the other test processes keep the cores busy, they take what those leave idle instead of
+    slowing them down."""
+    loops = [subprocess.Popen([sys.executable, "-c", "import os; os.nice(19)\nwhile True: pass"])
+             for _ in range(count)]
     try:
         yield
     finally:
