@@ -31,8 +31,8 @@ from tests.lagrangian_examples import CHAPLYGIN_SPHERE, VESELOVA
 from tests.support import (
     TEST_REDIS_URL,
     drop_database,
-    fresh_database_url,
     free_port,
+    fresh_database_url,
     poll_job,
     redis_available,
     start_api,
