@@ -51,8 +51,6 @@ def queue_database_url(queue: str) -> str:
     url = make_url(TEST_DATABASE_URL)
     name = "".join(c if c.isalnum() else "_" for c in queue.lower())
     rendered = url.set(database=f"{url.database}_q_{name}"[:63]).render_as_string(hide_password=False)
-    if not _QUEUE_DATABASES:
-        atexit.register(drop_queue_databases)
     _QUEUE_DATABASES.add(rendered)
     return rendered
 
@@ -76,6 +74,9 @@ def drop_database(url: str) -> None:
     with admin.connect() as connection:
         connection.execute(text(f'DROP DATABASE IF EXISTS "{target.database}" WITH (FORCE)'))
     admin.dispose()
+
+
+atexit.register(drop_queue_databases)
 
 
 def redis_available(url: str = TEST_REDIS_URL) -> bool:

@@ -2,13 +2,13 @@
 
 Heavy requests (the rattleback, the tilted Suslov problem, Veselova's system and Chaplygin's sphere from their
 Lagrangians, a hamiltonize and a bracket request) are sent three times: to a queue-mode API with a real Celery
-worker (two pool processes) and empty caches while busy processes load both cores (at the lowest priority:
-in the suite, the other test processes are the load), to that API again on a quiet machine (warm caches:
-what one pool process derived, the other reads back), and to an embedded API with empty caches on a quiet
-machine. Every answer (the job's status, error and result; the symbolic routes' JSON)
-is compared with the timing fields removed (:func:`schemas.results.without_timing`): they must be identical,
-byte for byte. (The loaded run is the queue's: its two pool processes derive side by side, where the embedded
-API has one job thread, and the busy loops spin only while the answers are computed.)
+worker (two pool processes) and empty caches while busy processes load both cores (at the lowest priority: in the
+suite, the other test processes are the load), to that API again on a quiet machine (warm caches: what one pool
+process derived, the other reads back), and to an embedded API with empty caches on a quiet machine. Every answer
+(the job's status, error and result; the symbolic routes' JSON) is compared with the timing fields removed
+(:func:`schemas.results.without_timing`): they must be identical, byte for byte. (The loaded run is the queue's:
+its two pool processes derive side by side, where the embedded API has one job thread, and the busy loops spin only
+while the answers are computed.)
 """
 
 from __future__ import annotations
@@ -30,9 +30,7 @@ from schemas.results import without_timing
 from tests.lagrangian_examples import CHAPLYGIN_SPHERE, VESELOVA
 from tests.support import (
     TEST_REDIS_URL,
-    drop_database,
     free_port,
-    fresh_database_url,
     poll_job,
     redis_available,
     start_api,
@@ -117,8 +115,8 @@ def test_heavy_requests_get_identical_answers_loaded_and_quiet_cold_and_warm_emb
         pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
     # 1. queue mode (the API, a real Celery worker with two pool processes, Redis, PostgreSQL), empty
     # caches, both cores loaded by other processes; 2. again, quiet and warm
-    queue, database = f"same-{uuid.uuid4().hex[:8]}", fresh_database_url()
-    env = {"NONHOLONOMIC_QUEUE": queue, "DATABASE_URL": database, "NONHOLONOMIC_WARM_UP": "false"}
+    queue = f"same-{uuid.uuid4().hex[:8]}"  # its job store: the queue's own (tests.support.queue_database_url)
+    env = {"NONHOLONOMIC_QUEUE": queue, "NONHOLONOMIC_WARM_UP": "false"}
     port = free_port()
     api = start_api(port, tmp_path / "api.log", {"REDIS_URL": TEST_REDIS_URL, **env,
                                                  "NONHOLONOMIC_CACHE_DIR": str(tmp_path / "cache-api")})
@@ -141,7 +139,6 @@ def test_heavy_requests_get_identical_answers_loaded_and_quiet_cold_and_warm_emb
     finally:
         stop(worker)
         stop(api)
-        drop_database(database)
     # 3. embedded mode (jobs in the API's own thread), empty caches, quiet
     port = free_port()
     api = start_api(port, tmp_path / "embedded.log", {"REDIS_URL": "", "NONHOLONOMIC_WARM_UP": "false",
