@@ -16,7 +16,6 @@ import venv
 from collections.abc import Iterator
 from pathlib import Path
 
-import nbformat
 import pytest
 
 from tests.support import ROOT, embedded_api
@@ -45,11 +44,19 @@ def test_there_are_the_seven_tutorials_the_docs_list():
     assert all(f"tutorials/{p.name}" in nav for p in TUTORIALS)
 
 
+def _read(path: Path):  # type: ignore[no-untyped-def]
+    """A notebook; nbformat is imported here, not at the top: its JSON Schema formats take about a second
+    to import, which every pytest-xdist process would pay while collecting."""
+    import nbformat
+
+    return nbformat.read(path, as_version=4)
+
+
 def _client_cell_imports() -> list[str]:
     """The top-level modules imported by the tutorials' cells not tagged ``plot``."""
     found: set[str] = set()
     for path in TUTORIALS:
-        for cell in nbformat.read(path, as_version=4).cells:
+        for cell in _read(path).cells:
             if cell.cell_type != "code" or "plot" in cell.metadata.get("tags", []):
                 continue
             for node in ast.walk(ast.parse(cell.source)):
@@ -65,12 +72,20 @@ def _run(args: list[str], cwd: Path, timeout: float = 900) -> subprocess.Complet
     return subprocess.run(args, capture_output=True, text=True, timeout=timeout, check=False, cwd=cwd)
 
 
+def _install(python: str, *specs: str, cwd: Path) -> None:
+    """``pip install`` into the venv of ``python``, its bytecode compiled on every core afterwards (as
+    scripts/_bootstrap.py does for .venv: pip alone compiles one file at a time)."""
+    install = _run([python, "-m", "pip", "install", "-q", "--no-compile", *specs], cwd)
+    assert install.returncode == 0, install.stderr[-3000:]
+    site = _run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], cwd, timeout=60)
+    _run([python, "-m", "compileall", "-qq", "-j", "0", site.stdout.strip()], cwd)
+
+
 def test_the_client_installs_alone_and_every_tutorial_runs_from_it(base, tmp_path):
     env_dir = tmp_path / "venv"
     venv.EnvBuilder(with_pip=True).create(env_dir)
     python = str(env_dir / "bin" / "python")
-    install = _run([python, "-m", "pip", "install", "-q", f"{ROOT / 'client'}[notebook]"], tmp_path)
-    assert install.returncode == 0, install.stderr[-3000:]
+    _install(python, f"{ROOT / 'client'}[notebook]", cwd=tmp_path)
     inventory = f"""
 import importlib.metadata as md, importlib.util, json
 names = sorted(d.metadata["Name"].lower() for d in md.distributions())
@@ -93,18 +108,17 @@ print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r
     serve = _run([cli, "serve"], tmp_path, timeout=60)
     assert serve.returncode == 2 and "needs the server" in serve.stderr and "pip install -e ." in serve.stderr
 
-    install = _run([python, "-m", "pip", "install", "-q", *NOTEBOOK_TOOLS], tmp_path)
-    assert install.returncode == 0, install.stderr[-3000:]
+    _install(python, *NOTEBOOK_TOOLS, cwd=tmp_path)
     executed = tmp_path / "executed"
     run = _run([python, str(ROOT / "scripts" / "tutorials.py"), "--url", base, "--out", str(executed)], tmp_path,
                timeout=1200)
     assert run.returncode == 0, run.stderr[-4000:]
     assert [line.split()[1] for line in run.stdout.splitlines() if line.startswith("ok ")] == [p.name for p in TUTORIALS]
     for path in TUTORIALS:
-        book = nbformat.read(executed / path.name, as_version=4)
+        book = _read(executed / path.name)
         outputs = [o for c in book.cells if c.cell_type == "code" for o in c.outputs]
         assert not [o for o in outputs if o.output_type == "error"], path.name
         assert any(o.output_type == "execute_result" for o in outputs), path.name
-    section = nbformat.read(executed / "section-and-exponents.ipynb", as_version=4)
+    section = _read(executed / "section-and-exponents.ipynb")
     pictures = [o for c in section.cells for o in getattr(c, "outputs", []) if "image/png" in o.get("data", {})]
     assert len(pictures) == 2  # the section and the running estimates, drawn
