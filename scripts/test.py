@@ -143,8 +143,9 @@ def parallel(argv: list[str]) -> list[str]:
     processes (default 3 on 2 cores: the suite waits on servers and workers as much as it computes), a
     file per process at a time in the order tests/conftest.py gives (the two longest, then the files of
     most tests first; all the long files first, cold at once, took 13 min 55 s instead of 11 min 42 s, and
-    4 processes 18 min 15 s against 16 min 11 s for 3 on the same day: more CPU, not less waiting),
-    and the 15 slowest tests listed."""
+    4 processes 18 min 15 s against 16 min 11 s for 3 on the same day: more CPU, not less waiting; again on
+    2026-11-29, 11 min 13 s against 10 min 10 s, and the waiting files spread among the others 10 min 46 s:
+    docs/testing.md), and the 15 slowest tests listed."""
     if "no:xdist" in argv or any(a in ("-n", "--numprocesses", "--dist") or a.startswith(("-n", "--numprocesses="))
                                  for a in argv):
         return []
