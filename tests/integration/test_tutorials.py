@@ -78,6 +78,7 @@ def _install(python: str, *specs: str, cwd: Path) -> None:
     install = _run([python, "-m", "pip", "install", "-q", "--no-compile", *specs], cwd)
     assert install.returncode == 0, install.stderr[-3000:]
     site = _run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"], cwd, timeout=60)
+    assert site.returncode == 0 and site.stdout.strip(), site.stderr[-3000:]
     _run([python, "-m", "compileall", "-qq", "-j", "0", site.stdout.strip()], cwd)
 
 
