@@ -73,4 +73,10 @@ def compile_site_packages(python: Path) -> None:
     where = subprocess.run([str(python), "-c", "import sysconfig; p = sysconfig.get_paths(); "
                             "print(*sorted({p['purelib'], p['platlib']}), sep='\\n')"],
                            check=True, capture_output=True, text=True).stdout.split()
-    subprocess.run([str(python), "-m", "compileall", "-qq", "-j", "0", *where], check=False)
+    compile_bytecode(python, where)
+
+
+def compile_bytecode(python: Path, paths: list[str], cwd: Path | None = None) -> None:
+    """``compileall`` over ``paths`` on every core, quietly; a file that does not compile is left to the
+    import that needs it."""
+    subprocess.run([str(python), "-m", "compileall", "-qq", "-j", "0", *paths], cwd=cwd, check=False)

@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from _bootstrap import PYTHON, ROOT, apt_install, ensure_installed, say
+from _bootstrap import PYTHON, ROOT, apt_install, compile_bytecode, ensure_installed, say
 
 REDIS_HOST, REDIS_PORT = "127.0.0.1", 6379
 PG_HOST, PG_PORT = "127.0.0.1", 5432
@@ -134,7 +134,7 @@ def compile_once(env: dict[str, str]) -> None:
     bytecode it makes: the suite starts about 100 Python processes (APIs, workers, pytest's), and where
     ``PYTHONDONTWRITEBYTECODE`` is set (as on the 2-core machines this project is developed on) each
     compiled every module of the project, and pytest each test module, again."""
-    subprocess.run([str(PYTHON), "-m", "compileall", "-q", "-j", "0", *PACKAGES], cwd=ROOT, check=False)
+    compile_bytecode(PYTHON, list(PACKAGES), cwd=ROOT)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
 
 
