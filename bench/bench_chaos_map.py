@@ -149,8 +149,9 @@ def part_a(cells: int, T: float) -> None:
 
 
 def part_b(shape: int, T: float, concurrencies: list[int]) -> None:
-    from tests.support import start_api, start_worker, stop, wait_healthy, free_port
     import httpx
+
+    from tests.support import free_port, start_api, start_worker, stop, wait_healthy
 
     body = {"system": {"kind": "chaplygin_ball", "inertia": list(INERTIA), "D": D,
                        "potential": {"kind": "linear", "a": list(A)}},

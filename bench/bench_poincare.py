@@ -48,6 +48,7 @@ from typing import Any, TypeVar  # noqa: E402
 
 import heyoka as hy  # noqa: E402
 import numpy as np  # noqa: E402
+from bench_ensemble import ball_equations  # noqa: E402  (bench/ is the script's directory)
 from scipy.integrate import solve_ivp  # noqa: E402
 
 from nonholonomic import get_system  # noqa: E402
@@ -55,8 +56,6 @@ from nonholonomic.analysis.poincare import Section, section, section_batch  # no
 from nonholonomic.definition import MechanicalSystem  # noqa: E402
 from nonholonomic.kernels import parameter_vector  # noqa: E402
 from tests.reference import ball_rhs  # noqa: E402
-
-from bench_ensemble import ball_equations  # noqa: E402  (bench/ is the script's directory)
 
 T = TypeVar("T")
 

@@ -24,9 +24,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "bench")]
 
 import numpy as np  # noqa: E402
+from bench_integration import ExtendedReference, error_vs, timed  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
-from bench_integration import ExtendedReference, error_vs, timed  # noqa: E402
 from nonholonomic.integration import MACHINE_EPSILON, integrate  # noqa: E402
 from nonholonomic.kernels import numeric, parameter_vector, state_vector  # noqa: E402
 from nonholonomic.systems import SYSTEMS  # noqa: E402

@@ -33,8 +33,8 @@ import signal  # noqa: E402
 import statistics  # noqa: E402
 import tempfile  # noqa: E402
 import threading  # noqa: E402
-import uuid  # noqa: E402
 import time  # noqa: E402
+import uuid  # noqa: E402
 
 import numpy as np  # noqa: E402
 

@@ -30,9 +30,11 @@ import numpy as np  # noqa: E402
 from nonholonomic.integration import MACHINE_EPSILON, heyoka_template, integrate  # noqa: E402
 from nonholonomic.kernels import parameter_vector, state_vector  # noqa: E402
 from nonholonomic.local_forms import euler_angles_and_rates, veselova_generalized_chaplygin  # noqa: E402
-from nonholonomic.systems import ball_on_surface as bs  # noqa: E402
-from nonholonomic.systems import generalized_chaplygin as gc  # noqa: E402
-from nonholonomic.systems import get_system  # noqa: E402
+from nonholonomic.systems import (
+    ball_on_surface as bs,  # noqa: E402
+    generalized_chaplygin as gc,  # noqa: E402
+    get_system,  # noqa: E402
+)
 
 BALL = {"D0": 0.036, "m": 1.0, "R": 0.3}
 B = np.array([[2.0, 0.3, -0.2], [0.3, 1.5, 0.4], [-0.2, 0.4, 1.0]])

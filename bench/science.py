@@ -74,29 +74,67 @@ import time  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from scipy.optimize import brentq  # noqa: E402
-
-from science_api import Api, _fmt, analyse, summarize  # noqa: E402
-from science_config import (  # noqa: E402
-    BALL, BALL_LEVEL, BALL_LINEAR, BALL_SECTION, FULL, GROWTH_CHAOTIC, JACOBI, JACOBI_LEVEL, JACOBI_LINEAR,
-    JACOBI_ROUND, JACOBI_SECTION, LYAPUNOV, ORDER_REGULAR, QUICK, ROUND_LEVEL, TORUS_AREA, TORUS_ENERGY,
-    Config)
-from science_geometry import ball_on_torus, ball_state, wrap  # noqa: E402
-from science_output import write_outputs  # noqa: E402
-from science_separatrix import _job_section, ball_line, jacobi_line, separatrix_probe  # noqa: E402
 
 # Re-exported (defined in the parts, not used here): every name of the single-file version stays a
 # name of this module.
-from science_api import (  # noqa: E402
-    STATE_COLUMNS as STATE_COLUMNS, Ensemble as Ensemble, _parse_csv as _parse_csv,
-    section_matrix as section_matrix)
-from science_config import MIN_POINTS as MIN_POINTS  # noqa: E402
-from science_geometry import (  # noqa: E402
-    ball_chart as ball_chart, ball_energy as ball_energy, ball_omega as ball_omega,
-    exponent_measures as exponent_measures, jacobi_chart as jacobi_chart, jacobi_state as jacobi_state,
-    neighbour_order as neighbour_order, roughness as roughness)
-from science_output import _plots as _plots, _rows_by_index as _rows_by_index  # noqa: E402
-from science_separatrix import Line as Line, _features as _features  # noqa: E402
+from science_api import (  # noqa: E402  # noqa: E402
+    STATE_COLUMNS as STATE_COLUMNS,
+    Api,
+    Ensemble as Ensemble,
+    _fmt,
+    _parse_csv as _parse_csv,
+    analyse,
+    section_matrix as section_matrix,
+    summarize,
+)
+from science_config import (  # noqa: E402
+    BALL,
+    BALL_LEVEL,
+    BALL_LINEAR,
+    BALL_SECTION,
+    FULL,
+    GROWTH_CHAOTIC,
+    JACOBI,
+    JACOBI_LEVEL,
+    JACOBI_LINEAR,
+    JACOBI_ROUND,
+    JACOBI_SECTION,
+    LYAPUNOV,
+    MIN_POINTS as MIN_POINTS,  # noqa: E402
+    ORDER_REGULAR,
+    QUICK,
+    ROUND_LEVEL,
+    TORUS_AREA,
+    TORUS_ENERGY,
+    Config,
+)
+from science_geometry import (  # noqa: E402  # noqa: E402
+    ball_chart as ball_chart,
+    ball_energy as ball_energy,
+    ball_omega as ball_omega,
+    ball_on_torus,
+    ball_state,
+    exponent_measures as exponent_measures,
+    jacobi_chart as jacobi_chart,
+    jacobi_state as jacobi_state,
+    neighbour_order as neighbour_order,
+    roughness as roughness,
+    wrap,
+)
+from science_output import (  # noqa: E402
+    _plots as _plots,
+    _rows_by_index as _rows_by_index,
+    write_outputs,  # noqa: E402
+)
+from science_separatrix import (  # noqa: E402  # noqa: E402
+    Line as Line,
+    _features as _features,
+    _job_section,
+    ball_line,
+    jacobi_line,
+    separatrix_probe,
+)
+from scipy.optimize import brentq  # noqa: E402
 
 # --------------------------------------------------------------------------------------------------
 # The studies

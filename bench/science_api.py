@@ -15,10 +15,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
 from science_config import GROWTH_CHAOTIC, MIN_POINTS, ORDER_REGULAR
 from science_geometry import exponent_measures, neighbour_order, roughness
-
 
 # --------------------------------------------------------------------------------------------------
 # The API

@@ -9,11 +9,9 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from science_config import MIN_POINTS
 from scipy.optimize import brentq
 from scipy.spatial import cKDTree
-
-from science_config import MIN_POINTS
-
 
 # --------------------------------------------------------------------------------------------------
 # Measures (pure numpy; tests/unit/test_science.py uses them)

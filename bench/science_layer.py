@@ -33,13 +33,13 @@ import os  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
+from science_config import BALL, BALL_LEVEL, JACOBI, JACOBI_LEVEL  # noqa: E402
+from science_geometry import ball_state, jacobi_state  # noqa: E402
 
 from nonholonomic import get_system  # noqa: E402
 from nonholonomic.analysis import indicators  # noqa: E402
 from nonholonomic.kernels import parameter_vector, state_vector  # noqa: E402
 from nonholonomic.simulation import simulate  # noqa: E402
-from science_config import BALL, BALL_LEVEL, JACOBI, JACOBI_LEVEL  # noqa: E402
-from science_geometry import ball_state, jacobi_state  # noqa: E402
 
 THETA_STAR = -0.33591693492
 T_LAYER = 2e4

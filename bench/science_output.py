@@ -10,11 +10,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from science_api import Api
 from science_config import JACOBI
 from science_geometry import jacobi_chart, wrap
-
 
 # --------------------------------------------------------------------------------------------------
 # Output: CSV, requests, numbers, plots

@@ -11,11 +11,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
 from science_api import Api, _fmt, analyse, summarize
 from science_config import BALL_SECTION, JACOBI_SECTION, LYAPUNOV, MIN_POINTS, Config
 from science_geometry import ball_state, jacobi_chart, jacobi_state
-
 
 # --------------------------------------------------------------------------------------------------
 # Separatrix probe

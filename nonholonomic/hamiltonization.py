@@ -52,7 +52,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache, lru_cache
 
 import numpy as np
 import sympy as sp
@@ -193,7 +193,7 @@ def _ball_form(system: MechanicalSystem) -> HamiltonianForm:
     )
 
 
-@lru_cache(maxsize=None)
+@cache
 def hamiltonian_form(system: MechanicalSystem) -> HamiltonianForm | None:
     """The Hamiltonian form of ``system`` after the paper's time substitution, or None.
 

@@ -29,8 +29,8 @@ from __future__ import annotations
 
 import copy
 import threading
-from collections import OrderedDict
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache

@@ -14,9 +14,10 @@ from collections.abc import Container
 import heyoka as hy
 import numpy as np
 
-from nonholonomic.definition import MechanicalSystem
 from nonholonomic import integration  # FIRST_SEGMENT_STEPS read at run time (tests change it)
+from nonholonomic.definition import MechanicalSystem
 from nonholonomic.integration import (
+    _GOING,
     MACHINE_EPSILON,
     IntegrationCancelled,
     IntegrationError,
@@ -24,7 +25,6 @@ from nonholonomic.integration import (
     StepRecorder,
     Trajectory,
     _batch_integrator,
-    _GOING,
     _integrate_heyoka,
     _sample_grid,
     _Segments,

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import sympy as sp
@@ -32,9 +32,9 @@ from nonholonomic.definition import (
     dot,
 )
 from nonholonomic.evidence.measure import CheckEvidence
+from nonholonomic.initial_state import constraint_problems, initial_state_problems, project_initial_state, vector_slice
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import VectorKernel, vectorize
-from nonholonomic.initial_state import constraint_problems, initial_state_problems, project_initial_state, vector_slice
 
 #: Relative push-forward residual accepted as round-off.
 PUSH_FORWARD_TOLERANCE = 1e-10
@@ -129,7 +129,7 @@ def _e3_target(source: MechanicalSystem) -> MechanicalSystem:
     )
 
 
-@lru_cache(maxsize=None)
+@cache
 def veselova_to_e3(potential: str = "zero") -> IsomorphismMap:
     """Eq. (2504-10-2): M = ρ_ω I^(1/2) ω, Γ = ρ_ω⁻¹ I^(−1/2) γ, dτ = dt/(ρ_ω √det I), any potential;
     the inverse ω = (Γ, IΓ)^(1/2) I^(−1/2) M, γ = (Γ, IΓ)^(−1/2) I^(1/2) Γ."""
@@ -164,12 +164,11 @@ def _proposition_1(I_diag: Sequence[sp.Expr], M: sp.Matrix, G: sp.Matrix) -> tup
     return s, L, c
 
 
-@lru_cache(maxsize=None)
+@cache
 def e3_to_clebsch() -> IsomorphismMap:
     """Proposition 1: (M, Γ) of eq. (2504-12) on Γ² = 1, (M, Γ) = 0 → (s, L) of the Clebsch case
     (2504-13) with the same α, β, I, c = M²(Γ, IΓ)/det I and k = +√det I (ERRATA 4), same time."""
-    from nonholonomic.systems import clebsch, get_system
-    from nonholonomic.systems import veselova_e3 as ve3
+    from nonholonomic.systems import clebsch, get_system, veselova_e3 as ve3
 
     source, target = get_system("veselova_e3"), get_system("clebsch")
     I_diag = (ve3.I1, ve3.I2, ve3.I3)
@@ -192,7 +191,7 @@ def e3_to_clebsch() -> IsomorphismMap:
     )
 
 
-@lru_cache(maxsize=None)
+@cache
 def veselova_to_neumann() -> IsomorphismMap:
     """The theorem after Proposition 1 (U = 0): Veselova → e(3) (2504-10-2) composed with
     Proposition 1 at α = 1, β = 0. It gives s = γ, L = ρ_ω ω, and the Neumann problem with the same
@@ -224,13 +223,12 @@ def veselova_to_neumann() -> IsomorphismMap:
     )
 
 
-@lru_cache(maxsize=None)
+@cache
 def chaplygin_ball_to_clebsch() -> IsomorphismMap:
     """Theorem 3 as corrected by ERRATA 8 (U = 0, (M, γ) = 0): L = ρ_μ M, s = (γ, Bγ)^(−1/2) B^(1/2) γ,
     L̃ = B^(−1/2) L, B = I J⁻¹; the Clebsch case with I → B, α = −β = det J / D, c = L²(γ, Bγ)/det B,
     k = +√det B, in τ (dτ = ρ_μ dt)."""
-    from nonholonomic.systems import chaplygin_ball as ball
-    from nonholonomic.systems import clebsch, get_system
+    from nonholonomic.systems import chaplygin_ball as ball, clebsch, get_system
 
     source, target = get_system("chaplygin_ball", "zero"), get_system("clebsch")
     assert source.reduced_time is not None
@@ -263,12 +261,10 @@ def chaplygin_ball_to_clebsch() -> IsomorphismMap:
     )
 
 
-@lru_cache(maxsize=None)
+@cache
 def rubber_ball_to_veselova(potential: str = "zero") -> IsomorphismMap:
     """The rubber-ball paragraph (ERRATA 10): the same (ω, γ) and time, Veselova's system with I → J = I + D·1."""
-    from nonholonomic.systems import get_system
-    from nonholonomic.systems import rubber_ball as rb
-    from nonholonomic.systems import veselova as ves
+    from nonholonomic.systems import get_system, rubber_ball as rb, veselova as ves
 
     source, target = get_system("rubber_ball", potential), get_system("veselova", potential)
     values = {ves.I1: rb.I1 + rb.D, ves.I2: rb.I2 + rb.D, ves.I3: rb.I3 + rb.D}
@@ -343,7 +339,7 @@ class _Kernels:
     level_projections: tuple[VectorKernel | None, ...]
 
 
-@lru_cache(maxsize=None)
+@cache
 def kernels(m: IsomorphismMap) -> _Kernels:
     """Compiled forward map, target parameters, dτ/dt, both sides of the push-forward identity,
     level conditions and constants (all over source state + source parameters)."""

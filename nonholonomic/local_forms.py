@@ -50,8 +50,7 @@ import sympy as sp
 from nonholonomic.definition import MechanicalSystem, cross, dot
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.kernels import VectorKernel, vectorize
-from nonholonomic.systems import chaplygin_ball as _ball
-from nonholonomic.systems import veselova as _ves
+from nonholonomic.systems import chaplygin_ball as _ball, veselova as _ves
 
 #: Pointwise relative residual accepted as round-off.
 TOLERANCE = 1e-10

@@ -12,8 +12,6 @@ from nonholonomic.analysis.options import PeriodicOrbitOptions, SectionOptions, 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import IntegralEvidence, integral_evidence
 from nonholonomic.evidence.measure import CheckEvidence, measure_evidence
-from nonholonomic.integration import ProgressCallback, Trajectory, integrate
-from nonholonomic.isomorphisms import isomorphism_evidence, maps_for
 from nonholonomic.initial_state import (
     ProjectionReport,
     initial_state_problems,
@@ -21,6 +19,8 @@ from nonholonomic.initial_state import (
     project_initial_state,
     vector_slice,
 )
+from nonholonomic.integration import ProgressCallback, Trajectory, integrate
+from nonholonomic.isomorphisms import isomorphism_evidence, maps_for
 from nonholonomic.kernels import numeric, parameter_vector, state_vector
 from nonholonomic.structure import bracket_evidence, euler_angle_evidence, structural_checks
 

@@ -15,8 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validato
 
 from nonholonomic.analysis.chaos_map import MapOptions
 from nonholonomic.analysis.ensemble import Member, default_chunk_size, plan
-from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges
-from nonholonomic.analysis.grid import plan as plan_grid
+from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges, plan as plan_grid
 from nonholonomic.analysis.indicators import thresholds_for
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem, project_initial_state

@@ -6,18 +6,18 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.claims import MAX_CLAIMS, parse_claim
 from nonholonomic.expressions import ExpressionError
+from nonholonomic.initial_state import FieldProblem
 from nonholonomic.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH
-from nonholonomic.initial_state import FieldProblem
 from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
-from nonholonomic.definition import MechanicalSystem
 from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.periodic_orbits import PeriodicOrbitRequest
 from schemas.report import PaperReport
-from schemas.settings import get_settings
 from schemas.results import SimulationResultModel
+from schemas.settings import get_settings
 from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]

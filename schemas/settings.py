@@ -7,7 +7,6 @@ from functools import lru_cache
 from pydantic import AliasChoices, Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-
 #: Queue mode's job store when ``DATABASE_URL`` is not set: PostgreSQL on this machine (the database is
 #: created if missing).
 DEFAULT_QUEUE_DATABASE_URL = "postgresql+psycopg://postgres@127.0.0.1:5432/nonholonomic"

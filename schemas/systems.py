@@ -21,9 +21,16 @@ from nonholonomic.lagrangian import parse as lagrangian
 from nonholonomic.lagrangian.checks import field_problem
 from nonholonomic.lagrangian.parse import MAX_COORDINATES
 from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, Potential
-from nonholonomic.systems import POTENTIAL_NAMES, SURFACE_KINDS, SYSTEMS, get_system, own_names, user_potential
-from nonholonomic.systems import generalized_chaplygin as gc
-from nonholonomic.systems import lagrangian as lag
+from nonholonomic.systems import (
+    POTENTIAL_NAMES,
+    SURFACE_KINDS,
+    SYSTEMS,
+    generalized_chaplygin as gc,
+    get_system,
+    lagrangian as lag,
+    own_names,
+    user_potential,
+)
 from nonholonomic.systems.ball_on_surface import SURFACE_VARIABLES, Surface, surface
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE as GENERALIZED_CHAPLYGIN_EXAMPLE
 
@@ -78,7 +85,7 @@ def _parameter_field(par: Parameter) -> tuple[Any, Any]:
     if par.shape == "vector":
         annotation = Annotated[list[number], Field(min_length=3, max_length=3)]
     elif par.shape == "symmetric_matrix":
-        annotation = Annotated[Union[Vec3, Mat3], _checked_by_core(par)]
+        annotation = Annotated[Vec3 | Mat3, _checked_by_core(par)]
     return annotation, Field(description=f"{par.meaning} [{par.unit}]; {par.admissible}")
 
 
@@ -312,7 +319,7 @@ def _potential_model(kind: str, pot: Potential) -> type[PotentialSpec]:
 def _system_model(kind: str) -> type[SystemSpec]:
     module = SYSTEMS[kind]
     allowed = [_potential_model(kind, pot) for pot in module.POTENTIALS.values()] + [_expression_model(kind)]
-    potential_union = Annotated[Union[tuple(allowed)], Field(discriminator="kind")]  # type: ignore[valid-type]
+    potential_union = Annotated[tuple(allowed), Field(discriminator="kind")]  # type: ignore[valid-type]
     default, default_kind = allowed[0], next(iter(module.POTENTIALS))
     extra: dict[str, Any] = {}
     if kind in SURFACE_KINDS:
@@ -333,7 +340,7 @@ def _system_model(kind: str) -> type[SystemSpec]:
 
 
 SYSTEM_MODELS: dict[str, type[SystemSpec]] = {kind: _system_model(kind) for kind in SYSTEMS}
-AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discriminator="kind")]  # type: ignore[valid-type]
+AnySystemSpec = Annotated[tuple(SYSTEM_MODELS.values()), Field(discriminator="kind")]  # type: ignore[valid-type]
 
 
 def definition_of(system_json: Mapping[str, Any]) -> MechanicalSystem:

@@ -11,10 +11,10 @@ from typing import Any
 
 import redis
 from fastapi import FastAPI, Request
-from kombu.exceptions import OperationalError
-from sqlalchemy.exc import OperationalError as DatabaseUnavailable
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from kombu.exceptions import OperationalError
+from sqlalchemy.exc import OperationalError as DatabaseUnavailable
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from schemas.problems import INTERNAL, INVALID_REQUEST, PROBLEM_MEDIA_TYPE, UNAVAILABLE, FieldError, Problem

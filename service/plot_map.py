@@ -11,9 +11,9 @@ from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from schemas.chaos_maps import INDICATOR_WORDS, STATUS_CODES, map_arrays
 from service.plot_ensemble import _ensemble_system
 from service.plots import PlotUnavailable, _axis_label, _headline, _new_figure
-from schemas.chaos_maps import INDICATOR_WORDS, STATUS_CODES, map_arrays
 
 #: Indicator panels are clipped at these quantiles so that a few huge values do not wash out the rest
 #: (the colour bar says so: its ends are open).

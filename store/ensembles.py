@@ -10,15 +10,15 @@ once none of their chunks is pending (or they were cancelled).
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 from sqlalchemy import Engine, delete, exists, insert, or_, select, update
 from sqlalchemy.orm import sessionmaker
 
 from store.expiry import Expiry
-from store.statements import autocommit, changed_one
 from store.models import EnsembleChunkRow, EnsembleRow
+from store.statements import autocommit, changed_one
 
 _PENDING = exists().where(EnsembleChunkRow.ensemble_id == EnsembleRow.id, EnsembleChunkRow.done.is_(False))
 
@@ -37,7 +37,7 @@ class EnsembleStore:
     def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]],
                owner: str | None = None, queue: str | None = None, broker_epoch: str | None = None) -> str:
         """Record an ensemble and its chunks, none started; returns its ``created_at`` (ISO 8601, UTC)."""
-        now = datetime.now(timezone.utc)
+        now = datetime.now(UTC)
         with self._session.begin() as session:
             session.add(EnsembleRow(id=ensemble_id, owner=owner, request=request,
                                     chunks=[list(c) for c in chunks], created=now.timestamp(),
@@ -95,7 +95,7 @@ class EnsembleStore:
     def delete_expired(self) -> int:
         """Delete ensembles created more than ``ttl_s`` ago that ended (no chunk pending, or
         cancelled); returns how many."""
-        horizon = datetime.now(timezone.utc).timestamp() - self.ttl_s
+        horizon = datetime.now(UTC).timestamp() - self.ttl_s
         with self._session.begin() as session:
             ids = list(session.scalars(select(EnsembleRow.id).where(
                 EnsembleRow.created < horizon, or_(EnsembleRow.cancelled.is_(True), ~_PENDING))))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import zlib
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +21,8 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from store.expiry import Expiry
-from store.statements import autocommit, changed_one
 from store.models import JobRow
+from store.statements import autocommit, changed_one
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ def owner_lock_key(owner: str) -> tuple[int, int]:
 
 
 def _now() -> datetime:
-    return datetime.now(timezone.utc)
+    return datetime.now(UTC)
 
 
 def make_engine(url: str) -> Engine:

@@ -150,7 +150,6 @@ def _announce(sender: Any = None, **_: Any) -> None:
     import os
 
     from workers.heartbeat import process_key, worker_key
-
     from workers.redelivery import Sweeper
 
     _open_job_store()

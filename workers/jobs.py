@@ -15,7 +15,6 @@ from schemas.report import REPORT_JOB, PaperReportRequest
 from schemas.results import claims_to_json, first_non_finite, result_to_json
 from workers.provenance import project
 
-
 log = logging.getLogger(__name__)
 
 

@@ -17,11 +17,11 @@ from typing import Any
 import heyoka as hy
 import numpy as np
 
+from nonholonomic import integration_batch
 from nonholonomic.analysis.options import SectionOptions, SpectrumOptions
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import integral_evidence_batch
 from nonholonomic.initial_state import parameter_warnings
-from nonholonomic import integration_batch
 from nonholonomic.integration import ProgressCallback
 from nonholonomic.simulation import SimulationResult, evidence, phase
 

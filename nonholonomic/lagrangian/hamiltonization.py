@@ -72,9 +72,9 @@ def _same_field(data: LagrangianData, reduction: ChaplyginReduction) -> tuple[bo
     difference cancelled to 0 when it is small enough, else a randomized identity test (exact rational
     states and parameters, 50 digits; a rational function of the state, sin and cos that vanishes at
     :data:`IDENTITY_POINTS` random points is 0 but with negligible probability)."""
-    from nonholonomic.systems.generalized_chaplygin import accelerations
-
     import mpmath
+
+    from nonholonomic.systems.generalized_chaplygin import accelerations
 
     eqs = derive(data)
     on = dict(reduction.dependent)

@@ -10,8 +10,7 @@ from functools import lru_cache
 import numpy as np
 import sympy as sp
 
-from nonholonomic import isomorphisms as iso
-from nonholonomic import local_forms as lf
+from nonholonomic import isomorphisms as iso, local_forms as lf
 from nonholonomic.brackets import chaplygin_ball_bracket, generalized_chaplygin_bracket
 from nonholonomic.definition import dot
 from nonholonomic.evidence.brackets import casimir_checks, jacobi_symbolic
@@ -31,8 +30,7 @@ from nonholonomic.report.common import (
     trig_identity,
 )
 from nonholonomic.report.verdict import Check, Claim, Row, claim_id
-from nonholonomic.systems import chaplygin_ball as ball
-from nonholonomic.systems import get_system
+from nonholonomic.systems import chaplygin_ball as ball, get_system
 
 GENERAL = "Generalized Chaplygin systems"
 SECTION = "Chaplygin's ball"

@@ -10,8 +10,7 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
-from nonholonomic import bounded
-from nonholonomic import isomorphisms as iso
+from nonholonomic import bounded, isomorphisms as iso
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import parameter_vector

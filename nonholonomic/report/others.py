@@ -26,10 +26,7 @@ from nonholonomic.report.common import (
     run,
 )
 from nonholonomic.report.verdict import Check, Claim, Row, claim_id
-from nonholonomic.systems import ball_on_quadric as bq
-from nonholonomic.systems import chaplygin_ball as cb
-from nonholonomic.systems import chaplygin_ball_veselova as bv
-from nonholonomic.systems import get_system
+from nonholonomic.systems import ball_on_quadric as bq, chaplygin_ball as cb, chaplygin_ball_veselova as bv, get_system
 
 VESELOVA_BALL = "Chaplygin's ball with the Veselova constraint"
 JACOBI = "Nonholonomic Jacobi problem"

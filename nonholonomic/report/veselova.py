@@ -9,8 +9,7 @@ from collections.abc import Callable
 import numpy as np
 import sympy as sp
 
-from nonholonomic import isomorphisms as iso
-from nonholonomic import local_forms as lf
+from nonholonomic import isomorphisms as iso, local_forms as lf
 from nonholonomic.definition import dot
 from nonholonomic.evidence.measure import measure_evidence
 from nonholonomic.hamiltonization import flow_residual, hamiltonian_form, symbolic_flow_identity
@@ -29,8 +28,7 @@ from nonholonomic.report.common import (
     trig_identity,
 )
 from nonholonomic.report.verdict import Check, Claim, Row, claim_id
-from nonholonomic.systems import clebsch, get_system
-from nonholonomic.systems import veselova as ves
+from nonholonomic.systems import clebsch, get_system, veselova as ves
 
 SECTION = "Veselova system"
 LINEAR = {"inertia": INERTIA, "a": A}

@@ -8,7 +8,7 @@ A kind whose geometry the user writes (``ball_on_surface``: the surface Φ) also
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache, lru_cache
 from types import ModuleType
 
 from nonholonomic.definition import MechanicalSystem
@@ -74,7 +74,7 @@ def user_potential(kind: str, text: str, parameters: tuple[str, ...]) -> Potenti
     return expression(text, tuple(parameters), SYSTEMS[kind].POTENTIAL_VARIABLES)
 
 
-@lru_cache(maxsize=None)
+@cache
 def own_names(kind: str) -> frozenset[str]:
     """Names a user's potential (or surface) parameter may not take: the system's parameters and their
     symbols, its state and derived vectors and their components, the times."""

@@ -44,7 +44,7 @@ B = adj(A)/det A.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache, lru_cache
 
 import numpy as np
 import sympy as sp
@@ -66,7 +66,7 @@ from nonholonomic.definition import (
     vector_symbols,
 )
 from nonholonomic.memo import remembered
-from nonholonomic.potentials import Potential, ZERO, catalog_of, harmonic, linear, resolve
+from nonholonomic.potentials import ZERO, Potential, catalog_of, harmonic, linear, resolve
 
 KIND = "ball_on_quadric"
 TITLE = "Nonholonomic Jacobi problem: a dynamically symmetric ball rolling on a quadric surface"
@@ -172,7 +172,7 @@ def angular_acceleration(n: sp.Matrix, n_dot: sp.Matrix, F: sp.Matrix, torque: s
     return (D * dot(omega, n) * n_dot + torque * cross(n, F)) / (D0 + D)
 
 
-@lru_cache(maxsize=None)
+@cache
 @remembered("reduction")
 def reduction_residual() -> sp.Matrix:
     """The solved dω/dt of :func:`eliminate_reaction` minus :func:`angular_acceleration` on the

@@ -35,7 +35,7 @@ from nonholonomic.definition import (
     vector_symbols,
 )
 from nonholonomic.memo import remembered
-from nonholonomic.potentials import Potential, ZERO, brun, catalog_of, linear, resolve
+from nonholonomic.potentials import ZERO, Potential, brun, catalog_of, linear, resolve
 
 KIND = "chaplygin_ball"
 TITLE = "Chaplygin's ball rolling without slipping on a horizontal plane"

@@ -48,7 +48,7 @@ hence orthogonal to E × γ and E × (E × γ)); dH/dt = μ (ω, E), so the ener
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache, lru_cache
 
 import sympy as sp
 
@@ -66,12 +66,12 @@ from nonholonomic.definition import (
     vector_symbols,
 )
 from nonholonomic.memo import remembered
-from nonholonomic.potentials import Potential, ZERO, catalog_of, linear, resolve
+from nonholonomic.potentials import ZERO, Potential, catalog_of, linear, resolve
 from nonholonomic.systems.chaplygin_ball import (
-    D,
     I1,
     I2,
     I3,
+    D,
     contact_inertia,
     contact_inertia_inverse,
     inertia,
@@ -110,7 +110,7 @@ STATE = (
 )
 
 
-@lru_cache(maxsize=None)
+@cache
 def _generic_solution() -> tuple[sp.Matrix, sp.Matrix, sp.Matrix, tuple[sp.Expr, ...], sp.Expr]:
     """Solve ``A ω' = n + μ e``, ``(ω', e) + (ω, e × ω) = 0`` for (ω', μ) with A, n, e generic."""
     entries = {(i, j): sp.Dummy(f"A{i + 1}{j + 1}", real=True) for i in range(3) for j in range(i, 3)}

@@ -55,7 +55,7 @@ from nonholonomic.definition import (
     vector_symbols,
 )
 from nonholonomic.memo import remembered
-from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
+from nonholonomic.potentials import ZERO, Potential, catalog_of, resolve
 
 KIND = "clebsch"
 TITLE = "Clebsch case of the Kirchhoff equations on e(3) (target of Proposition 1)"

@@ -32,9 +32,9 @@ import sympy as sp
 
 from nonholonomic.definition import FirstIntegral, MechanicalSystem, Parameter, dot
 from nonholonomic.memo import remembered
-from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
+from nonholonomic.potentials import ZERO, Potential, catalog_of, resolve
 from nonholonomic.systems import clebsch
-from nonholonomic.systems.clebsch import INERTIA, UNIT_C, UNIT_K, I1, I2, I3, L, c, k, s
+from nonholonomic.systems.clebsch import I1, I2, I3, INERTIA, UNIT_C, UNIT_K, L, c, k, s
 
 KIND = "neumann"
 TITLE = "Neumann problem: a point on the sphere in the quadratic potential c/2 (s, I s) (Kirchhoff form on e(3))"

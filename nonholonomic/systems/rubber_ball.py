@@ -48,8 +48,8 @@ from nonholonomic.definition import (
     vector_symbols,
 )
 from nonholonomic.memo import remembered
-from nonholonomic.potentials import Potential, ZERO, catalog_of, linear, resolve
-from nonholonomic.systems.chaplygin_ball import D, I1, I2, I3, J, J_inv, contact_inertia, det_J, inertia
+from nonholonomic.potentials import ZERO, Potential, catalog_of, linear, resolve
+from nonholonomic.systems.chaplygin_ball import I1, I2, I3, D, J, J_inv, contact_inertia, det_J, inertia
 from nonholonomic.systems.chaplygin_ball_veselova import constrained_acceleration
 
 KIND = "rubber_ball"

@@ -36,7 +36,7 @@ from nonholonomic.definition import (
     vector_symbols,
 )
 from nonholonomic.memo import remembered
-from nonholonomic.potentials import Potential, ZERO, brun, catalog_of, linear, quadratic, resolve
+from nonholonomic.potentials import ZERO, Potential, brun, catalog_of, linear, quadratic, resolve
 
 KIND = "veselova"
 TITLE = "Veselova system: a rigid body with a fixed point and the constraint (omega, gamma) = 0"

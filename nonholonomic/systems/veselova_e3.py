@@ -33,8 +33,8 @@ from nonholonomic.definition import (
     dot,
 )
 from nonholonomic.memo import remembered
-from nonholonomic.potentials import Potential, ZERO, catalog_of, resolve
-from nonholonomic.systems.clebsch import INERTIA, I1, I2, I3, inertia
+from nonholonomic.potentials import ZERO, Potential, catalog_of, resolve
+from nonholonomic.systems.clebsch import I1, I2, I3, INERTIA, inertia
 
 KIND = "veselova_e3"
 TITLE = "Hamiltonian system on e(3) with H = alpha H_alpha + beta H_beta (eq. 2504-12), the source of Proposition 1"

@@ -32,9 +32,9 @@ from service.exports import (
     json_download,
     section_csv,
     section_npz,
-    vector_widths,
     trajectory_csv,
     trajectory_npz,
+    vector_widths,
 )
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id

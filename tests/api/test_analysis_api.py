@@ -3,12 +3,11 @@ and every 422 they can give."""
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
-from tests.support import poll_job
 from tests.api.conftest import BALL, job
+from tests.support import poll_job
 
 LINEAR = {**BALL, "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}}
 

@@ -11,8 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from tests.support import poll_job
 from tests.api.conftest import BALL, STATE, job
+from tests.support import poll_job
 
 SAMPLED = {"system": dict(BALL),
            "members": {"sample": {"count": 6, "seed": 7, "level": {"energy": 1.0, "area": 0.0}}},

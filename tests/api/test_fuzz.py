@@ -23,8 +23,7 @@ import time
 from typing import Any
 
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 EXAMPLES = int(os.environ.get("NONHOLONOMIC_FUZZ_EXAMPLES", "60"))
 #: The note of an answer to a body with the deprecated budget_s.

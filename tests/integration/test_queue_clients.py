@@ -19,7 +19,6 @@ import httpx
 import pytest
 import redis
 from celery import Celery
-
 from sqlalchemy import delete, update
 
 from store.jobs import JobStore

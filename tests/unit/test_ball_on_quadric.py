@@ -8,8 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 import sympy as sp
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 from scipy.integrate import solve_ivp
 
 from nonholonomic import simulate

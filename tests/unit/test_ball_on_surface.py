@@ -17,9 +17,7 @@ from nonholonomic.expressions import ExpressionError
 from nonholonomic.initial_state import initial_state_problems, project_initial_state
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import numeric, parameter_vector, state_vector
-from nonholonomic.systems import ball_on_quadric as bq
-from nonholonomic.systems import ball_on_surface as bs
-from nonholonomic.systems import get_system
+from nonholonomic.systems import ball_on_quadric as bq, ball_on_surface as bs, get_system
 
 D0, M, R = 0.036, 1.0, 0.3
 BALL = {"D0": D0, "m": M, "R": R}

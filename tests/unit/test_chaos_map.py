@@ -5,17 +5,23 @@ checked against independent computations."""
 from __future__ import annotations
 
 import copy
-from functools import lru_cache
+from functools import cache
 
 import heyoka as hy
 import numpy as np
 import pytest
 
 from nonholonomic.analysis import indicators
-from nonholonomic.analysis.chaos_map import CHECK_FRACTION, MapOptions, checked_cells, map_summary, run_cells
+from nonholonomic.analysis.chaos_map import (
+    CHECK_FRACTION,
+    MapOptions,
+    cell_digest,
+    checked_cells,
+    map_summary,
+    run_cells,
+)
 from nonholonomic.analysis.ensemble import Member
 from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges, plan
-from nonholonomic.analysis.chaos_map import cell_digest
 from nonholonomic.kernels import numeric, parameter_vector
 from nonholonomic.systems import get_system
 from tests.unit.test_sampling import assert_on_level
@@ -26,7 +32,7 @@ LEVEL = {"energy": 2.0, "area": 0.0}
 GRID = Grid("gamma3", 0.0, ("gamma1", "M3"), LEVEL, (12, 10))
 
 
-@lru_cache(maxsize=None)
+@cache
 def ball(potential: str):
     system = get_system("chaplygin_ball", potential)
     return system, parameter_vector(system, {**BALL, **(FIELD if potential == "linear" else {})})

@@ -8,19 +8,17 @@ import dataclasses
 import numpy as np
 import pytest
 import sympy as sp
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 from scipy.integrate import solve_ivp
 
 from nonholonomic import simulate
 from nonholonomic.definition import InvariantMeasure, dot
 from nonholonomic.evidence.integrals import integral_evidence
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
+from nonholonomic.initial_state import initial_state_problems
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import parameter_vector
-from nonholonomic.initial_state import initial_state_problems
-from nonholonomic.systems import clebsch as cl
-from nonholonomic.systems import neumann as nm
+from nonholonomic.systems import clebsch as cl, neumann as nm
 
 s, L, I, I_inv, det_I = cl.s, cl.L, cl.inertia, cl.inertia_inv, cl.det_inertia
 alpha, beta, c, k = cl.alpha, cl.beta, cl.c, cl.k

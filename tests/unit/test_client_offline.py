@@ -254,8 +254,8 @@ def test_the_client_sends_its_api_key_as_a_bearer_token(monkeypatch):
 def test_wait_honours_retry_after_of_a_429_and_503(monkeypatch):
     import httpx
 
-    from nonholonomic_client import ApiError, Client
     import nonholonomic_client.base as api_module
+    from nonholonomic_client import ApiError, Client
 
     answers = [
         httpx.Response(429, json={"title": "Rate limit", "status": 429, "detail": "slow down"}, headers={"Retry-After": "2"}),

@@ -10,8 +10,7 @@ from pathlib import Path
 
 import pytest
 import sympy as sp
-from hypothesis import HealthCheck, assume, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
 from nonholonomic import expressions as ex
 from nonholonomic.brackets import chaplygin_ball_bracket, e3

@@ -8,8 +8,8 @@ import copy
 import dataclasses
 
 import numpy as np
-import sympy as sp
 import pytest
+import sympy as sp
 from pydantic import ValidationError
 
 from nonholonomic import simulate
@@ -20,8 +20,7 @@ from nonholonomic.local_forms import (
     euler_angles_and_rates,
     veselova_generalized_chaplygin,
 )
-from nonholonomic.systems import generalized_chaplygin as gc
-from nonholonomic.systems import get_system
+from nonholonomic.systems import generalized_chaplygin as gc, get_system
 from schemas.jobs import JobRequest
 from workers.jobs import run_job
 

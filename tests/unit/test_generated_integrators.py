@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from nonholonomic import get_system
-from nonholonomic import integration as integ
+from nonholonomic import get_system, integration as integ
 from nonholonomic.evidence.integrals import integral_evidence, integral_evidence_batch
 from nonholonomic.integration import (
     IntegrationCancelled,

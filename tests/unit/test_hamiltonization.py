@@ -23,9 +23,7 @@ from nonholonomic.hamiltonization import (
     time_density_spread,
 )
 from nonholonomic.kernels import parameter_vector, vectorize
-from nonholonomic.systems import SYSTEMS
-from nonholonomic.systems import chaplygin_ball as ball
-from nonholonomic.systems import veselova as ves
+from nonholonomic.systems import SYSTEMS, chaplygin_ball as ball, veselova as ves
 
 INERTIA = np.array([2.0, 3.0, 4.5])
 D = 0.7

@@ -15,9 +15,7 @@ from nonholonomic.definition import dot
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import parameter_vector
 from nonholonomic.simulation import simulate
-from nonholonomic.systems import SYSTEMS, get_system
-from nonholonomic.systems import chaplygin_ball as ball
-from nonholonomic.systems import veselova_e3 as ve3
+from nonholonomic.systems import SYSTEMS, chaplygin_ball as ball, get_system, veselova_e3 as ve3
 
 INERTIA = [1.0, 2.0, 3.5]
 CASES = [  # (map, source potential, source parameters)

@@ -17,8 +17,7 @@ from nonholonomic.integration import integrate
 from nonholonomic.lagrangian import derive, parse_system
 from nonholonomic.lagrangian.chaplygin import chaplygin_reduction
 from nonholonomic.lagrangian.measure import measure_verdict
-from nonholonomic.systems import generalized_chaplygin as gc
-from nonholonomic.systems import lagrangian as lagrangian_kind
+from nonholonomic.systems import generalized_chaplygin as gc, lagrangian as lagrangian_kind
 from tests.lagrangian_examples import PARTICLE, SLEIGH
 
 #: The nonholonomic particle in a harmonic field in x, y only (z cyclic).

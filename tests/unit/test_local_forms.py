@@ -17,9 +17,7 @@ import pytest
 import sympy as sp
 
 from nonholonomic import get_system, local_forms as lf, simulate
-from nonholonomic.systems import SYSTEMS
-from nonholonomic.systems import chaplygin_ball as ball
-from nonholonomic.systems import veselova as ves
+from nonholonomic.systems import SYSTEMS, chaplygin_ball as ball, veselova as ves
 
 R = sp.Rational
 th, ph = lf.theta, lf.phi

@@ -5,7 +5,7 @@ map (events only, no variational equations), Liouville's det Φ = ρ(x₀)/ρ(x(
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -23,7 +23,7 @@ FIELD = {"a": [0.3, -0.2, 0.5]}
 LEVEL = {"energy": 2.0, "area": 0.0}
 
 
-@lru_cache(maxsize=None)
+@cache
 def ball(potential: str, a3: float = 0.5):
     system = get_system("chaplygin_ball", potential)
     extra = {"a": [0.3, -0.2, a3]} if potential == "linear" else {}
@@ -59,7 +59,7 @@ def assert_checks_pass(orbit) -> None:
     assert not failed, failed
 
 
-@lru_cache(maxsize=None)
+@cache
 def centre_orbit():
     system, p = ball("linear")
     return find_periodic_orbit(system, p, on_section(system, p, -0.2, 0.0), "gamma3",

@@ -4,8 +4,7 @@ invariant measure."""
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from nonholonomic import get_system, simulate
 from nonholonomic.evidence.measure import pointwise_divergence_residual

@@ -7,19 +7,15 @@ import dataclasses
 import numpy as np
 import pytest
 import sympy as sp
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 from scipy.integrate import solve_ivp
 
 from nonholonomic import simulate
 from nonholonomic.definition import InvariantMeasure, dot, symmetric_matrix_symbols, vector_symbols
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
-from nonholonomic.kernels import numeric, parameter_vector
 from nonholonomic.initial_state import initial_state_problems
-from nonholonomic.systems import chaplygin_ball as cb
-from nonholonomic.systems import chaplygin_ball_veselova as bv
-from nonholonomic.systems import rubber_ball as rb
-from nonholonomic.systems import veselova
+from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.systems import chaplygin_ball as cb, chaplygin_ball_veselova as bv, rubber_ball as rb, veselova
 
 INERTIA = np.array([2.0, 3.0, 4.5])
 D = 0.7

@@ -7,16 +7,15 @@ import dataclasses
 import numpy as np
 import pytest
 import sympy as sp
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 from scipy.integrate import solve_ivp
 
 from nonholonomic import get_system, simulate
 from nonholonomic.definition import InvariantMeasure, cross, dot, gradient
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
+from nonholonomic.initial_state import initial_state_problems
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import numeric, parameter_vector
-from nonholonomic.initial_state import initial_state_problems
 from nonholonomic.systems import veselova as ves
 
 INERTIA = np.array([2.0, 3.0, 4.5])
