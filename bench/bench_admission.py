@@ -91,7 +91,10 @@ def main() -> None:
         mine = [backend.submit(JOB, "alice").id for _ in range(args.messages)]
         print(f"{args.messages} jobs submitted in {time.perf_counter() - start:.1f} s; "
               f"queue length {backend.redis.llen(queue)}")
-        first_page = lambda: backend.list_jobs(None, 50, None, "bob")
+
+        def first_page():
+            return backend.list_jobs(None, 50, None, "bob")
+
         backend._discover_all = lambda: scan_before(backend)  # type: ignore[method-assign]
         before = _median(first_page, args.repeat)
         del backend._discover_all

@@ -187,7 +187,8 @@ def part_b(shape: int, T: float, concurrencies: list[int]) -> None:
                         elapsed = time.perf_counter() - start
                         times[concurrency] = elapsed
                         m = view["summary"]["map"]
-                        print(f"   {concurrency} process(es): {elapsed:7.1f} s  ({shape * shape / elapsed:.0f} cells/s; "
+                        print(f"   {concurrency} process(es): {elapsed:7.1f} s  "
+                              f"({shape * shape / elapsed:.0f} cells/s; "
                               f"{view['chunks']['total']} chunks; chaotic fraction {m['chaotic_fraction']:.3f}, "
                               f"{m['outside']} outside, {m['failed']} failed; recomputed cells agree "
                               f"{m['check']['agree']}/{m['check']['cells']})")

@@ -90,7 +90,8 @@ def main() -> None:
             page_times.append(time.perf_counter() - start)
             page.wait_for_timeout(600)  # let the rest of the orbit stream in
             core_times.append(core_time(u, v))
-            print(f"  click ({u:+.3f}, {v:+.3f}): page {page_times[-1] * 1e3:6.1f} ms, core {core_times[-1] * 1e3:5.1f} ms")
+            print(f"  click ({u:+.3f}, {v:+.3f}): page {page_times[-1] * 1e3:6.1f} ms, "
+                  f"core {core_times[-1] * 1e3:5.1f} ms")
         browser.close()
     a, b = statistics.median(page_times), statistics.median(core_times)
     print("SUMMARY")

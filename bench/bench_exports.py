@@ -14,8 +14,9 @@ maximum by default) is run once; then, each ``--repeat`` times (median reported)
   ``to_netcdf`` of the bare arrays (no attributes). The ratio
   ``HTTP / reference`` is the cost of serving it (HTTP, the backend, streaming) over writing it;
 - the client's ``trajectory(format="xarray"|"pandas")`` against fetching and parsing the JSON alone;
-- every plot of the job as PNG and SVG (the trajectory drawn from dense output): the first request (drawn) and the second (cached), with the
-  drawn time against ``Figure.savefig`` of the same plot in this process;
+- every plot of the job as PNG and SVG (the trajectory drawn from dense output): the first request
+  (drawn) and the second (cached), with the drawn time against ``Figure.savefig`` of the same plot in
+  this process;
 - the peak resident memory of the API process while the CSV streams (``/proc``): streaming should
   not add a second copy of the result.
 """
@@ -171,7 +172,8 @@ def main() -> None:
                   f"(+{(peak - before) / 1024:.0f} MiB; the job JSON is {json_size / 2**20:.0f} MiB)")
 
             from service.plots import _render, job_plot  # noqa: F401  (the reference draws in this process)
-            print(f"\n{'plot':22s} {'bytes':>10s} {'drawn s':>8s} {'cached s':>9s} {'in-process s':>13s} {'drawn/in-proc':>14s}")
+            print(f"\n{'plot':22s} {'bytes':>10s} {'drawn s':>8s} {'cached s':>9s} {'in-process s':>13s} "
+                  f"{'drawn/in-proc':>14s}")
             for name in ("trajectory", "integrals"):
                 for fmt in ("png", "svg"):
                     url = f"{location}/plots/{name}.{fmt}"

@@ -30,7 +30,8 @@ The reference, measured in the same run: the same job run in this process throug
 :func:`workers.jobs.run_job` (what a worker process calls); ``2 / median`` is the rate two processes
 could reach with no queue, no database and no HTTP, and ``end-to-end / that`` the fraction of it the
 service delivers. Targets (issue 11): API CPU < 3 ms per job, ≥ 100 jobs/s, p99 submit < 50 ms,
-(issue 19) /health p99 ≤ 100 ms and always 200, nothing lost (reported PASS or MISS; the exit status is 1 only if a job was lost or failed).
+(issue 19) /health p99 ≤ 100 ms and always 200, nothing lost (reported PASS or MISS; the exit status
+is 1 only if a job was lost or failed).
 """
 
 from __future__ import annotations
@@ -348,19 +349,23 @@ def main() -> int:
             print(f"  {name:<11s}{line}   target p99 ≤ {TARGETS['p99_health_ms']:g} ms, all 200   "
                   f"{verdict(health_p99 <= TARGETS['p99_health_ms'] and not_ok == 0)}")
         for name, phase in (("saturation", burst), ("paced", paced)):  # busy: warm caches; paced: each alone
-            print(f"API CPU per job ({name + ')':<11s}{phase.api_cpu_ms:5.2f} ms   target < {TARGETS['api_cpu_ms']:g} ms   "
-                  f"ratio {phase.api_cpu_ms / TARGETS['api_cpu_ms']:.2f}   {verdict(phase.api_cpu_ms < TARGETS['api_cpu_ms'])}")
+            print(f"API CPU per job ({name + ')':<11s}{phase.api_cpu_ms:5.2f} ms   "
+                  f"target < {TARGETS['api_cpu_ms']:g} ms   "
+                  f"ratio {phase.api_cpu_ms / TARGETS['api_cpu_ms']:.2f}   "
+                  f"{verdict(phase.api_cpu_ms < TARGETS['api_cpu_ms'])}")
         print(f"end to end (saturation)  {burst.end_to_end_per_s:6.1f} /s   target ≥ {TARGETS['jobs_per_s']:g}/s   "
               f"ratio {burst.end_to_end_per_s / TARGETS['jobs_per_s']:.2f}   "
               f"{verdict(burst.end_to_end_per_s >= TARGETS['jobs_per_s'])};  "
               f"{burst.end_to_end_per_s / bare:.3f} of the bare reference ({bare:.0f}/s: run_job back to back)")
         kept_up = paced.end_to_end_per_s >= 0.97 * paced.offered_per_s
         print(f"end to end (paced)       {paced.end_to_end_per_s:6.1f} /s   offered {paced.offered_per_s:.0f}/s: "
-              f"{'kept up' if kept_up else 'fell behind'}   {verdict(kept_up and paced.end_to_end_per_s >= TARGETS['jobs_per_s'])}")
+              f"{'kept up' if kept_up else 'fell behind'}   "
+              f"{verdict(kept_up and paced.end_to_end_per_s >= TARGETS['jobs_per_s'])}")
         print(f"submit p99 (paced)       {p99:6.1f} ms   target < {TARGETS['p99_submit_ms']:g} ms   "
               f"ratio {p99 / TARGETS['p99_submit_ms']:.2f}   {verdict(p99 < TARGETS['p99_submit_ms'])}")
         print(f"nothing lost             {succeeded}/{len(ids)} listed succeeded, {same}/{len(sample)} sampled "
-              f"results equal to the in-process run bit for bit   {verdict(succeeded == len(ids) and same == len(sample))}")
+              f"results equal to the in-process run bit for bit   "
+              f"{verdict(succeeded == len(ids) and same == len(sample))}")
         return 0 if succeeded == len(ids) and same == len(sample) else 1
     except Exception:
         print((logs / "worker.log").read_text()[-3000:], (logs / "api.log").read_text()[-3000:])

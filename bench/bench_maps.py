@@ -74,10 +74,10 @@ def main() -> None:
         p = parameter_vector(m.source, parameters)
         X = iso.sample_states(m, p, STATES)
         iso.apply(m, p, X[:10])  # compile
-        core = median_time(lambda: iso.apply(m, p, X), 5)
+        core = median_time(lambda m=m, p=p, X=X: iso.apply(m, p, X), 5)
         ref_states = None
 
-        def by_hand() -> None:
+        def by_hand(name=name, X=X) -> None:
             nonlocal ref_states
             ref_states = np.array([reference(name, x) for x in X])
 
@@ -101,7 +101,7 @@ def main() -> None:
         integrate(m.target, p_target, y0, 0.0, 0, times=times)  # compile
         runs = {}
         for engine, tol, repeat in (("heyoka", None, 5), ("scipy", 1e-12, 1)):
-            def go(engine=engine, tol=tol) -> None:
+            def go(engine=engine, tol=tol, runs=runs, m=m, p_target=p_target, y0=y0, times=times) -> None:
                 runs[engine] = integrate(m.target, p_target, y0, 0.0, 0, times=times, engine=engine, tolerance=tol)
             runs[engine + "_time"] = median_time(go, repeat)
         dist = {e: float(np.max(np.abs(runs[e].states - mapped["states"]))) for e in ("heyoka", "scipy")}

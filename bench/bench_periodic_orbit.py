@@ -12,8 +12,9 @@ A. **The core**: :func:`nonholonomic.analysis.periodic_orbit.find_periodic_orbit
    the crossings, the independent DOP853 integration, the multipliers).
 B. **The reference**: ``scipy.optimize.root(method="hybr")`` (MINPACK's Powell hybrid method, its own
    finite-difference Jacobian) on F(z) = P^k(z) - z in the chart, z → the state by the grid's completion
-   (:func:`nonholonomic.analysis.grid.complete`), P by heyoka's events (:func:`~nonholonomic.analysis.poincare.section`);
-   then the same closing error max|x(T) - x0| measured by the core's integrator.
+   (:func:`nonholonomic.analysis.grid.complete`), P by heyoka's events
+   (:func:`~nonholonomic.analysis.poincare.section`); then the same closing error max|x(T) - x0|
+   measured by the core's integrator.
 
 Printed: the core's time with its checks (median of 3 after a warm-up) and its search alone
 (``search_time_s``: Newton's part), the reference's time, the ratio reference / core's search, and both
@@ -92,9 +93,9 @@ def main() -> None:
     rows = []
     for name, (z0, k) in SEEDS.items():
         seed = state_at(system, p, z0)
-        t_core, orbit = timed(lambda: find_periodic_orbit(system, p, seed, "gamma3", period=k, t_final=200.0,
-                                                          coordinates=("gamma1", "M3")))
-        t_ref, (x_ref, T_ref) = timed(lambda: reference(system, p, z0, k))
+        t_core, orbit = timed(lambda seed=seed, k=k: find_periodic_orbit(
+            system, p, seed, "gamma3", period=k, t_final=200.0, coordinates=("gamma1", "M3")))
+        t_ref, (x_ref, T_ref) = timed(lambda z0=z0, k=k: reference(system, p, z0, k))
         err_core = closing(system, p, orbit.initial_state, orbit.period_t)
         err_ref = closing(system, p, x_ref, T_ref)
         same = np.max(np.abs(x_ref - orbit.initial_state))

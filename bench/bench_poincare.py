@@ -166,7 +166,8 @@ class HandWritten:
 
         gamma3 = equations[5][0]
         self.ta = hy.taylor_adaptive(equations, [0.0] * 7, pars=pars, tol=float(np.finfo(float).eps),
-                                     nt_events=[hy.nt_event(gamma3, on_crossing, direction=hy.event_direction.positive)])
+                                     nt_events=[hy.nt_event(gamma3, on_crossing,
+                                                            direction=hy.event_direction.positive)])
 
     def crossings(self, y0: np.ndarray, t_final: float) -> tuple[np.ndarray, np.ndarray, int]:
         """Crossing times, states (M, γ, τ) and the steps taken."""
@@ -363,7 +364,8 @@ def main() -> None:
     for r in results:
         speed, accuracy = r.speed(r.hand), r.accuracy(r.scipy_fast)
         print(f"{r.name:<7} crossings/s core / heyoka by hand {speed:6.3f}  target >= {SPEED_TARGET:g}: "
-              f"{'PASS' if speed >= SPEED_TARGET else 'MISS'};  crossing-state accuracy ratio vs scipy {accuracy:8.3g}x  "
+              f"{'PASS' if speed >= SPEED_TARGET else 'MISS'};  "
+              f"crossing-state accuracy ratio vs scipy {accuracy:8.3g}x  "
               f"target >= {ACCURACY_TARGET:g}x: {'PASS' if accuracy >= ACCURACY_TARGET else 'MISS'}")
     print("================================================================")
 

@@ -90,7 +90,8 @@ def main() -> None:
     print(f"{'kind':<24}{'pot':<7}{'scipy ms':>9}{'err':>9}{'drift':>9} | {'hy eps ms':>9}{'err':>9}{'drift':>9}"
           f"{'speed x':>9} | {'equal tol':>9}{'ms':>8}{'err':>9}{'speed x':>9}")
     for r in rows:
-        print(f"{r['kind']:<24}{r['potential']:<7}{r['scipy_ms']:>9.1f}{r['scipy_err']:>9.1e}{r['scipy_drift']:>9.1e} | "
+        print(f"{r['kind']:<24}{r['potential']:<7}{r['scipy_ms']:>9.1f}{r['scipy_err']:>9.1e}"
+              f"{r['scipy_drift']:>9.1e} | "
               f"{r['eps_ms']:>9.2f}{r['eps_err']:>9.1e}{r['eps_drift']:>9.1e}{r['scipy_ms'] / r['eps_ms']:>9.0f} | "
               f"{r['equal_tol']:>9.0e}{r['equal_ms']:>8.2f}{r['equal_err']:>9.1e}{r['scipy_ms'] / r['equal_ms']:>9.0f}")
     print("err: max-abs final-state error vs heyoka long double; drift: max relative integral drift; "

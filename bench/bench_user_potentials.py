@@ -159,8 +159,8 @@ def worker_memory(jobs: int, max_memory_mib: int) -> list[str]:
         for _, rss in every:
             pids |= set(rss)
         for done, rss in samples:
-            lines.append(f"  after {done:4d} jobs: pool processes " + ", ".join(f"{m:5.0f}" for m in sorted(rss.values()))
-                         + " MiB")
+            lines.append(f"  after {done:4d} jobs: pool processes "
+                         + ", ".join(f"{m:5.0f}" for m in sorted(rss.values())) + " MiB")
         lines.append(f"  largest resident memory of a pool process: {peak:.0f} MiB; pool processes seen: {len(pids)} "
                      f"({len(pids) - 2} replacements); jobs failed: {failed}")
         return lines

@@ -41,7 +41,8 @@ B = np.array([[2.0, 0.3, -0.2], [0.3, 1.5, 0.4], [-0.2, 0.4, 1.0]])
 INERTIA = {"I1": 2.0, "I2": 3.0, "I3": 4.5}
 
 
-def timed(system, values: dict, state: dict, t_final: float, samples: int, runs: int) -> tuple[float, np.ndarray, float]:
+def timed(system, values: dict, state: dict, t_final: float, samples: int,
+          runs: int) -> tuple[float, np.ndarray, float]:
     """(median seconds, states, seconds of the first call: compile or disk cache)."""
     p = parameter_vector(system, values)
     y0 = state_vector(system, state, p)

@@ -32,7 +32,8 @@ def main() -> int:
     print("SUMMARY")
     print(f"  examples: {args.examples} per kind x {kinds} kinds (jobs, brackets, hamiltonize) in {elapsed:.0f} s; "
           f"{args.examples / 60:.0f}x the suite's seeded run")
-    print(f"  result: {'OK: no 500, no non-finite number, every problem names its fields' if run.returncode == 0 else 'FAIL'}")
+    result = "OK: no 500, no non-finite number, every problem names its fields" if run.returncode == 0 else "FAIL"
+    print(f"  result: {result}")
     return run.returncode
 
 

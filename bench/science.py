@@ -160,7 +160,7 @@ def study_jacobi(api: Api, cfg: Config, results: dict) -> None:
         "jacobi-linear": api.ensemble("jacobi-linear", sampled(JACOBI_LINEAR, {"energy": 0.5}, cfg.controls,
                                                                cfg.t_final, JACOBI_SECTION)),
     }
-    print("\nMembers on one level, section and largest exponent to t = %g:" % cfg.t_final)
+    print(f"\nMembers on one level, section and largest exponent to t = {cfg.t_final:g}:")
     labels = {"jacobi": "Jacobi problem, B = (1, 2, 3), U = 0, (H, K) = (0.5, 2)",
               "ball": "control: Chaplygin ball, U = 0, (H, c) = (2, 0) (integrable)",
               "jacobi-round": "control: the same ball on an ellipsoid of revolution, B = (1, 1, 3) (integrable)",
@@ -259,7 +259,7 @@ def study_periods(api: Api, cfg: Config, results: dict) -> None:
             continue
         lo, hi = float(grid[k[0]]), float(grid[k[0] + 1])
         before = api.jobs
-        M3_res = brentq(lambda v: closing(v, q, p)[0], lo, hi, xtol=1e-15, rtol=1e-15)
+        M3_res = brentq(lambda v, q=q, p=p: closing(v, q, p)[0], lo, hi, xtol=1e-15, rtol=1e-15)
         residual, state = closing(M3_res, q, p)
         F = float(np.dot(state["M"], state["M"]))
         print(f"  resonant torus nu = {p}/{q}: M3(phi = 0) = {M3_res:.15f}, F = (M, M) = {F:.15f}, closing angle "

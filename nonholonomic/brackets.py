@@ -109,7 +109,8 @@ def chaplygin_ball_bracket() -> PoissonStructure:
     P = _antisymmetric(entries, 6)
     return PoissonStructure(
         "chaplygin_ball", "2604-6", tuple(L) + tuple(g), P, parameters=(ball.I1, ball.I2, ball.I3, ball.D),
-        casimirs=(("gamma^2", g.dot(g)), ("(L, gamma)/rho_mu = (M, gamma)", Lg * sp.sqrt(ball.contact_inertia_determinant(g)))),
+        casimirs=(("gamma^2", g.dot(g)),
+                  ("(L, gamma)/rho_mu = (M, gamma)", Lg * sp.sqrt(ball.contact_inertia_determinant(g)))),
         formula="{L_i, L_j} = e_ijk (L_k - D (L, gamma) rho_mu^2 J_i J_j gamma_k), {L_i, gamma_j} = e_ijk gamma_k, "
                 "{gamma_i, gamma_j} = 0",
     )

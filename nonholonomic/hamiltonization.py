@@ -149,9 +149,11 @@ def _veselova_form(system: MechanicalSystem) -> HamiltonianForm:
         from_bracket_variables=tuple(omega_of) + tuple(gamma_of),
         hamiltonian=H,
         time_density=system.reduced_time.density,
-        formula=("M = rho_omega I^(1/2) omega, Gamma = rho_omega^-1 I^(-1/2) gamma, rho_omega = (gamma, I^-1 gamma)^(1/2) "
+        formula=("M = rho_omega I^(1/2) omega, Gamma = rho_omega^-1 I^(-1/2) gamma, "
+                 "rho_omega = (gamma, I^-1 gamma)^(1/2) "
                  "= (Gamma, I Gamma)^(-1/2); d tau = dt / (rho_omega sqrt(det I)); "
-                 "H = (Gamma, I Gamma) M^2 / 2 + U(gamma(Gamma)), gamma(Gamma) = (Gamma, I Gamma)^(-1/2) I^(1/2) Gamma; "
+                 "H = (Gamma, I Gamma) M^2 / 2 + U(gamma(Gamma)), "
+                 "gamma(Gamma) = (Gamma, I Gamma)^(-1/2) I^(1/2) Gamma; "
                  "e(3) bracket, dx/dtau = {H, x}"),
         equation="2504-10-2, 2504-11",
         extra_integrals=extra,
@@ -175,7 +177,8 @@ def _ball_form(system: MechanicalSystem) -> HamiltonianForm:
     M_of_L = L * sp.sqrt(ball.contact_inertia_determinant(g))  # M = L / ρ_μ
     extra: tuple[tuple[str, sp.Expr, str], ...] = ()
     if system.potential == "zero":
-        extra = (("F", dot(L, L) * ball.contact_inertia_determinant(g), "2604-4 in (L, gamma): F = M^2 = L^2 / rho_mu^2"),)
+        extra = (("F", dot(L, L) * ball.contact_inertia_determinant(g),
+                  "2604-4 in (L, gamma): F = M^2 = L^2 / rho_mu^2"),)
     if system.reduced_time is None:  # pragma: no cover
         raise ValueError("chaplygin_ball has no reduced time")
     return HamiltonianForm(

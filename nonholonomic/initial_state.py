@@ -205,5 +205,6 @@ def parameter_warnings(system: MechanicalSystem, parameters: Mapping[str, object
                                (i3, i1, i2, "I3 + I1 >= I2")):
             if a + b < c:
                 warnings.append(f"principal moments violate the triangle inequality {names} "
-                                f"({a:g} + {b:g} < {c:g}): no rigid body has them; the equations were integrated anyway")
+                                f"({a:g} + {b:g} < {c:g}): no rigid body has them; "
+                                "the equations were integrated anyway")
     return warnings

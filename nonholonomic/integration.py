@@ -279,7 +279,8 @@ def integrate(
         grid = _sample_grid(float(t_final), int(samples))
     else:
         grid = np.asarray(times, dtype=float)
-        if grid.ndim != 1 or len(grid) < 2 or grid[0] != 0.0 or np.any(np.diff(grid) < 0) or not np.all(np.isfinite(grid)):
+        if (grid.ndim != 1 or len(grid) < 2 or grid[0] != 0.0 or np.any(np.diff(grid) < 0)
+                or not np.all(np.isfinite(grid))):
             raise ValueError("times must be finite, non-decreasing, start at 0 and have at least 2 entries")
     if engine == "heyoka":
         return _integrate_heyoka(system, p, y0, grid, tolerance or MACHINE_EPSILON, progress)

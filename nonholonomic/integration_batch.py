@@ -1,9 +1,10 @@
 """Many members of one system at once: heyoka's batch mode (``hy.recommended_simd_size()`` SIMD lanes).
 
-The batch path beside :mod:`nonholonomic.integration` (one orbit) and on its integrators: each member gets the :class:`~nonholonomic.integration.Trajectory`
-the one-orbit path would give it, and a member whose lane fails is integrated alone to say why. With
-``check_points`` (what an ensemble chunk asks for) the states the evidence is computed at are equally
-spaced check points written by heyoka with the samples, not every accepted step: no Python call per step.
+The batch path beside :mod:`nonholonomic.integration` (one orbit) and on its integrators: each member gets the
+:class:`~nonholonomic.integration.Trajectory` the one-orbit path would give it, and a member whose lane fails is
+integrated alone to say why. With ``check_points`` (what an ensemble chunk asks for) the states the evidence is
+computed at are equally spaced check points written by heyoka with the samples, not every accepted step: no Python
+call per step.
 """
 
 from __future__ import annotations
@@ -134,9 +135,10 @@ def _trajectory(lane: _Lane, common: tuple[object, ...]) -> Trajectory:
 
 class _BatchRun:
     """The members of one :func:`integrate_batch` call, one batch integrator's lanes at a time. Short
-    runs (every lane at ``t_final`` within :data:`~nonholonomic.integration.FIRST_SEGMENT_STEPS` steps: an ensemble's common case)
-    keep their step records in one log of the call and are finished all together (:meth:`finish`: a few
-    array operations in all instead of a few dozen per batch); long runs and failures batch by batch."""
+    runs (every lane at ``t_final`` within :data:`~nonholonomic.integration.FIRST_SEGMENT_STEPS` steps: an
+    ensemble's common case) keep their step records in one log of the call and are finished all together
+    (:meth:`finish`: a few array operations in all instead of a few dozen per batch); long runs and failures batch by
+    batch."""
 
     def __init__(self, ts: TaylorSystem, ta: hy.taylor_adaptive_batch, grid: np.ndarray, tol: float,
                  check_times: np.ndarray | None = None) -> None:

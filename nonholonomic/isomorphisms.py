@@ -35,6 +35,7 @@ from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.initial_state import constraint_problems, initial_state_problems, project_initial_state, vector_slice
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import VectorKernel, vectorize
+from nonholonomic.refusals import RefusedFields
 
 #: Relative push-forward residual accepted as round-off.
 PUSH_FORWARD_TOLERANCE = 1e-10
@@ -186,7 +187,8 @@ def e3_to_clebsch() -> IsomorphismMap:
         time_variable="t",
         constants=(("c", c, "M^2 (Gamma, I Gamma) / det I (Proposition 1's level)"),),
         corrections=("ERRATA 4: k = +sqrt(det I) with dx/dt = {H, x}; the printed -sqrt(det I) gives residual 2.0",
-                     "the Hamiltonian printed after Proposition 1 needs -c/2 det I (Gamma, I^-1 Gamma) in its beta part",
+                     "the Hamiltonian printed after Proposition 1 needs -c/2 det I (Gamma, I^-1 Gamma) "
+                     "in its beta part",
                      "Gamma^2 = 1 is needed (printed as a consequence); off it the residual is O(1)"),
     )
 
@@ -494,7 +496,8 @@ def isomorphism_evidence(system: MechanicalSystem, parameters: np.ndarray, t: np
             name=f"isomorphism:{name}", quantity="push-forward field residual", formula=m.formula,
             equation=m.equation, method="pointwise", residual=residual, tolerance=PUSH_FORWARD_TOLERANCE,
             passed=bool(np.isfinite(residual) and residual <= PUSH_FORWARD_TOLERANCE),
-            detail=(f"max over {len(idx)} trajectory samples of |D Phi f / (dtau/dt) - g(Phi)|_1 / (|D Phi f / (dtau/dt)|_1 "
+            detail=(f"max over {len(idx)} trajectory samples of |D Phi f / (dtau/dt) - g(Phi)|_1 / "
+                    "(|D Phi f / (dtau/dt)|_1 "
                     f"+ |g(Phi)|_1), g the field of {m.target.kind} with the target parameters of each state; "
                     + "; ".join(m.corrections))))
         cmp = compare_trajectories(m, parameters, t, tau, states)
@@ -531,12 +534,8 @@ def isomorphism_evidence(system: MechanicalSystem, parameters: np.ndarray, t: np
 # --------------------------------------------------------------------------------------------------
 # the endpoint's work: describe a map, map named states
 
-class MapInputError(ValueError):
-    """Bad states for a map: ``problems`` lists ``(field, reason)`` with fields like ``states[2].gamma``."""
-
-    def __init__(self, problems: list[tuple[str, str]]) -> None:
-        super().__init__("; ".join(f"{f}: {r}" for f, r in problems))
-        self.problems = problems
+class MapInputError(RefusedFields):
+    """Bad states for a map: ``problems()`` lists ``(field, reason)`` with fields like ``states[2].gamma``."""
 
 
 def _groups(system: MechanicalSystem, values: np.ndarray) -> dict[str, object]:
@@ -613,7 +612,8 @@ def map_states(m: IsomorphismMap, parameters: dict[str, object], states: Sequenc
         for i, state in enumerate(states):
             bad = sorted(set(state) ^ set(names))
             if bad:
-                problems += [(f"states[{i}].{b}", f"expected exactly the target vectors {', '.join(names)}") for b in bad]
+                problems += [(f"states[{i}].{b}", f"expected exactly the target vectors {', '.join(names)}")
+                             for b in bad]
                 continue
             y = np.concatenate([np.asarray(state[n], dtype=float) for n in names])
             x = inv(y[None, :], p)[0]

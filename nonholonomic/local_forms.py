@@ -548,7 +548,8 @@ def local_form_evidence(system: MechanicalSystem, parameters: np.ndarray, states
         L_loc = kernels.lagrangian(np.column_stack([th, ph, thd / n, phd / n]), p)[:, 0] if used else L_vec
         return [
             _item("euler_kinetic_energy", "T(theta, phi, thetadot, phidot)",
-                  "T = T0 at psidot = -cos(theta) phidot: 1/2 I1 (thetadot cos phi - phidot sin phi sin theta cos theta)^2"
+                  "T = T0 at psidot = -cos(theta) phidot: "
+                  "1/2 I1 (thetadot cos phi - phidot sin phi sin theta cos theta)^2"
                   " + 1/2 I2 (thetadot sin phi + phidot cos phi sin theta cos theta)^2 + 1/2 I3 phidot^2 sin^4 theta"
                   " = (I omega, omega)/2", "2504-8", _relative(T_loc, T_vec, np.abs(T_vec)) if used else None,
                   used, skipped, min_sin_theta, "|T_local - (I omega, omega)/2| / ((I omega, omega)/2)"),
@@ -556,7 +557,8 @@ def local_form_evidence(system: MechanicalSystem, parameters: np.ndarray, states
                   "L = T(theta, phi, N theta', N phi') - U = 1/2 (gamma' x gamma, I (gamma' x gamma)) / "
                   "(gamma, I^-1 gamma) - U, N = (gamma, I^-1 gamma)^(-1/2) (ERRATA 3)", "2504-9",
                   _relative(L_loc, L_vec, np.abs(T_vec) + np.abs(U)) if used else None, used, skipped,
-                  min_sin_theta, "|L_local - L_vector| / (|T| + |U|), theta' = thetadot / N, gamma' = gamma x omega / N"),
+                  min_sin_theta,
+                  "|L_local - L_vector| / (|T| + |U|), theta' = thetadot / N, gamma' = gamma x omega / N"),
         ]
 
     M = states[keep, 0:3]

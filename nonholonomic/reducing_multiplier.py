@@ -579,7 +579,8 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
             rho, how = found[0], found[1]
             exact_density = holds is True
             how += "; d ln rho = A2 dq1 - A1 dq2 " + (
-                "proved exactly" if exact_density else "not proved symbolically" + (f": {unproved}" if unproved else ""))
+                "proved exactly" if exact_density
+                else "not proved symbolically" + (f": {unproved}" if unproved else ""))
             break
     integrability = f"{condition_text}; simplified value: 0 ({closed_detail})"
     equations = {**EQUATIONS, "density_method": how}

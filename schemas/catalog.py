@@ -21,7 +21,8 @@ class CatalogParameter(_Strict):
 
     name: str = Field(description="request name of the group")
     shape: Literal["scalar", "vector", "symmetric_matrix"]
-    components: list[str] = Field(description="the symbols, in order (a symmetric matrix: entries 11, 12, 13, 22, 23, 33)")
+    components: list[str] = Field(
+        description="the symbols, in order (a symmetric matrix: entries 11, 12, 13, 22, 23, 33)")
     meaning: str
     unit: str
     admissible: str = Field(description="admissible range, e.g. '> 0'")

@@ -356,7 +356,8 @@ class EnsembleRequest(BaseModel):
                 raise LevelProblem(f"members.grid.{exc.field}", exc.reason) from None
             names = grid.coordinates
             return [Member(i, p, cells.states[i - start],
-                           {"cell": [i // grid.shape[1], i % grid.shape[1]], names[0]: float(cells.values[i - start, 0]),
+                           {"cell": [i // grid.shape[1], i % grid.shape[1]],
+                            names[0]: float(cells.values[i - start, 0]),
                             names[1]: float(cells.values[i - start, 1]), "branches": int(cells.branches[i - start])})
                     for i in range(start, stop)]
         from nonholonomic.analysis.sampling import LevelError, on_level

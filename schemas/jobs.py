@@ -46,8 +46,8 @@ class IntegratorOptions(BaseModel):
     tolerance: FiniteFloat | None = Field(
         None, ge=MACHINE_EPSILON, le=MAX_TOLERANCE,
         description=f"heyoka: relative/absolute tolerance in [machine epsilon {MACHINE_EPSILON:.7g}, "
-                    f"{MAX_TOLERANCE:g}] (default machine epsilon: below it the engine cannot reach the tolerance and the job would not "
-                    f"end); scipy: rtol = atol (default 1e-12, at least {SCIPY_MIN_TOLERANCE:g})")
+                    f"{MAX_TOLERANCE:g}] (default machine epsilon: below it the engine cannot reach the tolerance "
+                    f"and the job would not end); scipy: rtol = atol (default 1e-12, at least {SCIPY_MIN_TOLERANCE:g})")
 
 
 class ClaimRequest(BaseModel):

@@ -230,7 +230,8 @@ def member_to_json(member: MemberResult) -> dict[str, Any]:
     del body["system"]
     spectrum = body.get("lyapunov")
     if spectrum and len(spectrum["convergence_t"]) > MEMBER_CONVERGENCE_ROWS:  # evenly thinned, the last kept
-        keep = np.unique(np.linspace(0, len(spectrum["convergence_t"]) - 1, MEMBER_CONVERGENCE_ROWS).round().astype(int))
+        rows = np.linspace(0, len(spectrum["convergence_t"]) - 1, MEMBER_CONVERGENCE_ROWS)
+        keep = np.unique(rows.round().astype(int))
         spectrum["convergence_t"] = [spectrum["convergence_t"][i] for i in keep]
         spectrum["convergence"] = [spectrum["convergence"][i] for i in keep]
     out.update(body)

@@ -37,16 +37,17 @@ class Settings(BaseSettings):
                                      description="largest members x samples of one ensemble (what its results hold)")
     max_ensemble_section_points: int = Field(10_000_000, ge=1,
                                              description="largest members x poincare.max_points of one ensemble")
-    max_ensemble_chunks: int = Field(1000, ge=1, description="most chunks (queue messages) of one ensemble: its POST sends "
-                                                            "them all (~1 ms of API CPU each); by default chunks grow "
-                                                            "to fit")
+    max_ensemble_chunks: int = Field(1000, ge=1, description="most chunks (queue messages) of one ensemble: its POST "
+                                                            "sends them all (~1 ms of API CPU each); by default chunks "
+                                                            "grow to fit")
     job_soft_time_limit_s: float = Field(600.0, gt=0)
     job_time_limit_s: float = Field(660.0, gt=0)
     visibility_timeout_s: float = Field(3600.0, gt=0, description="broker redelivery timeout (> time limits)")
     job_ttl_s: int = Field(7 * 24 * 3600, gt=0, description="how long job records and results are kept")
     embedded_workers: int = Field(1, ge=1, description="threads running jobs in embedded mode")
     symbolic_workers: int = Field(2, ge=1, description="symbolic requests running at once (child processes)")
-    symbolic_queue: int = Field(8, ge=0, description="symbolic requests waiting for a slot; beyond: 503 with Retry-After")
+    symbolic_queue: int = Field(8, ge=0,
+                                description="symbolic requests waiting for a slot; beyond: 503 with Retry-After")
     max_symbolic_expressions: int = Field(200, ge=1, description="most expressions in one symbolic request")
     max_symbolic_characters: int = Field(40_000, ge=1,
                                          description="most characters of expressions in one symbolic request")

@@ -24,7 +24,8 @@ def sweep_target(system: MechanicalSystem, path: str) -> tuple[Parameter, int | 
     if par.shape == "symmetric_matrix":
         raise ValueError(f"{par.name} is a matrix; sweeps take a scalar or a vector component")
     if par.is_vector and (index is None or index >= len(par.symbols)):
-        raise ValueError(f"{par.name} is a vector: name a component {par.name}[0] .. {par.name}[{len(par.symbols) - 1}]")
+        last = len(par.symbols) - 1
+        raise ValueError(f"{par.name} is a vector: name a component {par.name}[0] .. {par.name}[{last}]")
     if not par.is_vector and index is not None:
         raise ValueError(f"{par.name} is a scalar: no index")
     return par, index

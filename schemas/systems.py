@@ -21,6 +21,7 @@ from nonholonomic.lagrangian import parse as lagrangian
 from nonholonomic.lagrangian.checks import field_problem
 from nonholonomic.lagrangian.parse import MAX_COORDINATES
 from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, Potential
+from nonholonomic.refusals import RefusedField
 from nonholonomic.systems import (
     POTENTIAL_NAMES,
     SURFACE_KINDS,
@@ -129,27 +130,51 @@ def _taken(names: list[str], kind: str) -> str:
             "another")
 
 
+# The validators every user-written expression shares: cheap, deterministic checks on the request path; sympy
+# reads the expressions off the event loop (service/validation.py).
+
+def own_names_checked(values: dict[str, float], reserved: Sequence[str], kind: str) -> dict[str, float]:
+    """A block's own parameter names: valid identifiers (not a function's name) and none of ``reserved``
+    (``kind``'s names); the system's own names (a definition to build) are checked off the event loop."""
+    try:
+        declare_symbols(list(values))
+    except ExpressionError as exc:
+        raise ValueError(str(exc)) from None
+    taken = sorted(set(values) & set(reserved))
+    if taken:
+        raise ValueError(_taken(taken, kind))
+    return values
+
+
+def expression_checked(text: str, names: Sequence[str], entry: str | None = None) -> str:
+    """The cheap checks of one expression: length, syntax, the whitelist of functions, only ``names``
+    (``entry`` names an item of a list field: ``constraints[1]``)."""
+    try:
+        check_expression(text, list(names), max_length=MAX_EXPRESSION_LENGTH)
+    except ExpressionError as exc:
+        raise ValueError(str(exc) if entry is None else f"{entry}: {exc}") from None
+    return text
+
+
+def core_names_checked(value: Any, field_name: str, check: Callable[[], object]) -> Any:
+    """``value`` of the names field ``field_name`` after the core's own name check (``check()``, raising a
+    :class:`~nonholonomic.refusals.RefusedField`); refusals of other fields are left to their validators."""
+    try:
+        check()
+    except RefusedField as exc:
+        if exc.field == field_name:
+            raise ValueError(exc.reason) from None
+    return value
+
+
 def _expression_model(kind: str) -> type[PotentialSpec]:
     def names(cls: type, values: dict[str, float]) -> dict[str, float]:
-        """Cheap checks; the system's own names (a definition to build) are checked off the event loop."""
-        try:
-            declare_symbols(list(values))
-        except ExpressionError as exc:
-            raise ValueError(str(exc)) from None
-        taken = sorted(set(values) & set(POTENTIAL_NAMES[kind]))
-        if taken:
-            raise ValueError(_taken(taken, kind))
-        return values
+        return own_names_checked(values, POTENTIAL_NAMES[kind], kind)
 
     def parsed(cls: type, text: str, info: ValidationInfo) -> str:
-        """The cheap checks only (syntax, whitelist, names); sympy reads U off the event loop (service/validation.py)."""
         if "parameters" not in info.data:
             return text  # the parameters are refused already
-        try:
-            check_expression(text, [*POTENTIAL_NAMES[kind], *info.data["parameters"]], max_length=MAX_EXPRESSION_LENGTH)
-        except ExpressionError as exc:
-            raise ValueError(str(exc)) from None
-        return text
+        return expression_checked(text, [*POTENTIAL_NAMES[kind], *info.data["parameters"]])
 
     return create_model(  # type: ignore[call-overload]
         f"{_camel(kind)}ExpressionPotential",
@@ -197,27 +222,14 @@ class SurfaceSpec(BaseModel):
     @field_validator("parameters")
     @classmethod
     def _names(cls, values: dict[str, float]) -> dict[str, float]:
-        """Cheap checks; the system's own names (a definition to build) are checked off the event loop."""
-        try:
-            declare_symbols(list(values))
-        except ExpressionError as exc:
-            raise ValueError(str(exc)) from None
-        taken = sorted(set(values) & set(SURFACE_VARIABLES))
-        if taken:
-            raise ValueError(_taken(taken, "ball_on_surface"))
-        return values
+        return own_names_checked(values, SURFACE_VARIABLES, "ball_on_surface")
 
     @field_validator("Phi")
     @classmethod
     def _parsed(cls, text: str, info: ValidationInfo) -> str:
-        """The cheap checks only (syntax, whitelist, names); sympy reads Phi off the event loop (service/validation.py)."""
         if "parameters" not in info.data:
             return text  # the parameters are refused already
-        try:
-            check_expression(text, [*SURFACE_VARIABLES, *info.data["parameters"]], max_length=MAX_EXPRESSION_LENGTH)
-        except ExpressionError as exc:
-            raise ValueError(str(exc)) from None
-        return text
+        return expression_checked(text, [*SURFACE_VARIABLES, *info.data["parameters"]])
 
     def core(self) -> Surface:
         """The core's :class:`nonholonomic.systems.ball_on_surface.Surface`."""
@@ -319,7 +331,7 @@ def _potential_model(kind: str, pot: Potential) -> type[PotentialSpec]:
 def _system_model(kind: str) -> type[SystemSpec]:
     module = SYSTEMS[kind]
     allowed = [_potential_model(kind, pot) for pot in module.POTENTIALS.values()] + [_expression_model(kind)]
-    potential_union = Annotated[tuple(allowed), Field(discriminator="kind")]  # type: ignore[valid-type]
+    potential_union = Annotated[Union[tuple(allowed)], Field(discriminator="kind")]  # type: ignore[valid-type]  # noqa: UP007
     default, default_kind = allowed[0], next(iter(module.POTENTIALS))
     extra: dict[str, Any] = {}
     if kind in SURFACE_KINDS:
@@ -340,7 +352,7 @@ def _system_model(kind: str) -> type[SystemSpec]:
 
 
 SYSTEM_MODELS: dict[str, type[SystemSpec]] = {kind: _system_model(kind) for kind in SYSTEMS}
-AnySystemSpec = Annotated[tuple(SYSTEM_MODELS.values()), Field(discriminator="kind")]  # type: ignore[valid-type]
+AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discriminator="kind")]  # type: ignore[valid-type]  # noqa: UP007
 
 
 def definition_of(system_json: Mapping[str, Any]) -> MechanicalSystem:
@@ -394,25 +406,15 @@ class GeneralizedChaplyginSpec(SystemSpec):
         order = ("coordinates", "velocities", "parameters")
         names = {k: tuple(info.data.get(k, ())) for k in order[:order.index(info.field_name)]}
         names[info.field_name] = tuple(value)
-        try:
-            gc.declared(*(names.get(k, ()) for k in order))
-        except gc.DataError as exc:
-            if exc.field == info.field_name:
-                raise ValueError(exc.reason) from None
-        return value
+        return core_names_checked(value, info.field_name, lambda: gc.declared(*(names.get(k, ()) for k in order)))
 
     @field_validator("lagrangian", "a1", "a2", "b", "potential")
     @classmethod
     def _parsed(cls, text: str | None, info: ValidationInfo) -> str | None:
-        """The cheap checks only (syntax, whitelist, names); sympy reads the field off the event loop (service/validation.py)."""
         if text is None or any(k not in info.data for k in ("coordinates", "velocities", "parameters")):
             return text  # the names are refused already
-        try:
-            check_expression(text, [*info.data["coordinates"], *info.data["velocities"], *info.data["parameters"]],
-                             max_length=MAX_EXPRESSION_LENGTH)
-        except ExpressionError as exc:
-            raise ValueError(str(exc)) from None
-        return text
+        return expression_checked(text, [*info.data["coordinates"], *info.data["velocities"],
+                                         *info.data["parameters"]])
 
     def parameter_values(self) -> dict[str, Any]:
         return dict(self.parameters)
@@ -438,8 +440,8 @@ class GeneralizedChaplyginSpec(SystemSpec):
         step([field for field, _ in self.expressions()])
         try:
             self.data()
-        except gc.DataError as exc:
-            return None, [FieldProblem(f"system.{exc.field}", exc.reason)]
+        except RefusedField as exc:
+            return None, [FieldProblem(f, r) for f, r in exc.within("system").problems()]
         return self.validation_definition(), []
 
 
@@ -479,26 +481,20 @@ class LagrangianSpec(SystemSpec):
         if info.field_name == "parameters" and "coordinates" not in info.data:
             return value  # the coordinates are refused already
         coordinates = tuple(value if info.field_name == "coordinates" else info.data["coordinates"])
-        try:
-            lagrangian.declared(coordinates, tuple(value) if info.field_name == "parameters" else ())
-        except lagrangian.DataError as exc:
-            if exc.field == info.field_name:
-                raise ValueError(exc.reason) from None
-        return value
+        parameters = tuple(value) if info.field_name == "parameters" else ()
+        return core_names_checked(value, info.field_name, lambda: lagrangian.declared(coordinates, parameters))
 
     @field_validator("L", "constraints")
     @classmethod
     def _parsed(cls, value: Any, info: ValidationInfo) -> Any:
-        """The cheap checks only (syntax, whitelist, names); sympy reads the fields off the event loop (service/validation.py)."""
         if any(k not in info.data for k in ("coordinates", "parameters")):
             return value  # the names are refused already
         names = ["t", *info.data["coordinates"], *(lagrangian.velocity_name(c) for c in info.data["coordinates"]),
                  *info.data["parameters"]]
-        for i, text in enumerate([value] if info.field_name == "L" else value):
-            try:
-                check_expression(text, names, max_length=MAX_EXPRESSION_LENGTH)
-            except ExpressionError as exc:
-                raise ValueError(str(exc) if info.field_name == "L" else f"constraints[{i}]: {exc}") from None
+        if info.field_name == "L":
+            return expression_checked(value, names)
+        for i, text in enumerate(value):
+            expression_checked(text, names, entry=f"constraints[{i}]")
         return value
 
     def parameter_values(self) -> dict[str, Any]:
@@ -547,8 +543,8 @@ class LagrangianSpec(SystemSpec):
         try:
             self.data()
             return self.outline(), []
-        except lagrangian.DataError as exc:
-            return None, [FieldProblem(f"system.{exc.field}", exc.reason)]
+        except RefusedField as exc:
+            return None, [FieldProblem(f, r) for f, r in exc.within("system").problems()]
 
 
 #: What POST /v1/jobs takes as ``system``: every kind of the catalog, a generalized Chaplygin system and a

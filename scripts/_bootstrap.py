@@ -37,11 +37,11 @@ def _create_venv() -> None:
     say(f"creating {VENV}")
     try:
         venv.EnvBuilder(with_pip=True, clear=True).create(VENV)
-    except (subprocess.CalledProcessError, OSError):
+    except (subprocess.CalledProcessError, OSError) as exc:
         # Debian's python3 lacks ensurepip until python3-venv is installed.
         version = f"python3.{sys.version_info.minor}-venv"
         if not (apt_install(version) or apt_install("python3-venv")):
-            raise SystemExit("python3 cannot create a virtual environment: install python3-venv and retry")
+            raise SystemExit("python3 cannot create a virtual environment: install python3-venv and retry") from exc
         venv.EnvBuilder(with_pip=True, clear=True).create(VENV)
 
 

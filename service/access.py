@@ -32,7 +32,7 @@ from schemas.settings import Settings
 from service.errors import ProblemError
 
 if TYPE_CHECKING:
-    from service.backends.base import JobRecord
+    from service.backends.base import JobBackend, JobRecord
 
 
 def _owner_of(name: str | None, key: str) -> str:
@@ -177,35 +177,29 @@ async def caller(request: Request) -> str | None:
     return owner
 
 
-def job_of(request: Request, job_id: str) -> JobRecord:
-    """The job ``job_id`` if the caller may see it, else a 404 (the same as for an unknown id).
+def job_of(backend: JobBackend, owner: str | None, job_id: str) -> JobRecord:
+    """The job ``job_id`` if ``owner`` may see it, else a 404 (the same as for an unknown id).
 
     With keys on, whether the caller may see the job is asked first, in one lookup that costs the same
     for an unknown id and another key's job (the record, its result included, is read only when the
-    caller may see it): the 404s are alike in status, body and work, so their timing tells nothing.
+    caller may see it: :meth:`JobBackend.find`): the 404s are alike in status, body and work, so their
+    timing tells nothing.
     """
-    backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
-    find = getattr(backend, "find", None)
-    if find is not None:  # queue mode: the visibility lookup and the broker scan (service.backends.queue)
-        record = find(job_id, owner)
-    else:
-        store = getattr(backend, "store", None)
-        hidden = owner is not None and store is not None and not store.visible(job_id, owner)
-        record = None if hidden else backend.get(job_id)
+    record = backend.find(job_id, owner)
     if record is None or not visible(record.owner, owner):
         raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
     return record
 
 
-def ensemble_of(request: Request, ensemble_id: str) -> dict[str, Any]:
-    """The ensemble's record if the caller may see it, else a 404 (the same as for an unknown id).
+def ensemble_of(backend: JobBackend, owner: str | None, ensemble_id: str) -> dict[str, Any]:
+    """The ensemble's record if ``owner`` may see it, else a 404 (the same as for an unknown id).
 
     As for a job (:func:`job_of`), with keys on the visibility is asked first in one lookup that costs
     the same for an unknown id and another key's ensemble; the record is read only when it is visible.
     """
-    store, owner = request.app.state.backend.ensembles, getattr(request.state, "owner", None)
+    store = backend.ensembles
     record = None if owner is not None and not store.visible(ensemble_id, owner) else store.record(ensemble_id)
-    if record is None or not visible(record.get("owner"), getattr(request.state, "owner", None)):
+    if record is None or not visible(record.get("owner"), owner):
         raise ProblemError(404, "Unknown ensemble", f"no ensemble with id {ensemble_id!r}", NOT_FOUND)
     return record
 

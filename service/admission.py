@@ -10,24 +10,23 @@ Work (jobs, ensembles, paper reports) is admitted and submitted in one step, :fu
 most ``max_active_jobs_per_key`` queued or running jobs, and the queue at most ``max_queued_messages``
 jobs and ensemble chunks (an ensemble counts each chunk). In queue mode (several API processes) the
 backend keeps both atomically (an advisory lock per owner in PostgreSQL, a reservation in Redis: see
-:mod:`service.backends.queue`); in embedded mode (one API process) a process lock does.
+:mod:`service.backends.queue`); in embedded mode (one API process) the backend's lock does. Both sit
+behind the same two calls of :class:`service.backends.base.JobBackend`: ``submit(..., max_active=)``
+and ``reserve_messages``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
-import threading
 import time
 from collections.abc import AsyncIterator, Iterator
 from contextlib import asynccontextmanager, contextmanager
 from typing import Any
 
-from fastapi import Request
-
 from schemas.problems import OVERLOADED, QUEUE_FULL, FieldError
 from schemas.settings import Settings
-from service.backends.base import JobRecord, QueueFull
+from service.backends.base import JobBackend, JobRecord, QueueFull
 from service.errors import ProblemError, invalid_request
 from store.jobs import ActiveBoundReached
 
@@ -90,8 +89,6 @@ class SymbolicPool:
 
 #: Seconds a client is told to wait when its key has too many active jobs or the queue is full.
 QUEUE_FULL_RETRY_S = 10
-#: Admissions of a backend without ``atomic_admission`` (embedded mode: one API process), one at a time.
-_PROCESS_LOCK = threading.Lock()
 
 
 def _too_many_jobs(active: int, settings: Settings) -> ProblemError:
@@ -108,53 +105,38 @@ def _queue_full(waiting: int, messages: int, settings: Settings) -> ProblemError
 
 
 @contextmanager
-def _admitted(request: Request, messages: int, adds_a_job: bool) -> Iterator[int | None]:
-    """Room for ``messages`` in the queue (and, if ``adds_a_job``, one more active job of the caller's key)
-    while the body submits; yields the per-key bound the backend keeps itself when it records the job
-    (queue mode), None when it is kept here. Raises the 429 problems."""
-    settings: Settings = request.app.state.settings
-    backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
+def _admitted(backend: JobBackend, owner: str | None, settings: Settings, messages: int,
+              adds_a_job: bool) -> Iterator[int | None]:
+    """Room for ``messages`` in the queue (and, if ``adds_a_job``, one more active job of ``owner``)
+    while the body submits; yields the per-key bound the backend keeps when it records the job (None:
+    keys are off or no job is added). Raises the 429 problems."""
     if messages > settings.max_queued_messages:  # schemas.ensembles refuses these before any work: a safeguard
         raise invalid_request([FieldError(field="members", reason=(
             f"{messages} chunks exceed what the queue holds (max_queued_messages={settings.max_queued_messages})"))])
-    if getattr(backend, "atomic_admission", False):
-        if owner is not None and not adds_a_job:  # an ensemble adds no job: a plain check is exact enough
-            active = backend.active_jobs(owner)
-            if active >= settings.max_active_jobs_per_key:
-                raise _too_many_jobs(active, settings)
-        try:
-            with backend.reserve_messages(messages, settings.max_queued_messages):
-                yield settings.max_active_jobs_per_key if owner is not None and adds_a_job else None
-        except QueueFull as exc:
-            raise _queue_full(exc.waiting + exc.pending, messages, settings) from None
-        except ActiveBoundReached as exc:
-            raise _too_many_jobs(exc.active, settings) from None
-        return
-    with _PROCESS_LOCK:
-        if owner is not None:
-            active = backend.active_jobs(owner)
-            if active >= settings.max_active_jobs_per_key:
-                raise _too_many_jobs(active, settings)
-        waiting = backend.queued_messages()
-        if waiting + messages > settings.max_queued_messages:
-            raise _queue_full(waiting, messages, settings)
-        yield None
+    if owner is not None and not adds_a_job:  # an ensemble adds no job: a plain check is exact enough
+        active = backend.active_jobs(owner)
+        if active >= settings.max_active_jobs_per_key:
+            raise _too_many_jobs(active, settings)
+    try:
+        with backend.reserve_messages(messages, settings.max_queued_messages):
+            yield settings.max_active_jobs_per_key if owner is not None and adds_a_job else None
+    except QueueFull as exc:
+        raise _queue_full(exc.waiting + exc.pending, messages, settings) from None
+    except ActiveBoundReached as exc:
+        raise _too_many_jobs(exc.active, settings) from None
 
 
-def admit_job(request: Request, body: dict[str, Any]) -> JobRecord:
-    """Admit and submit a job (or a paper report) of the caller's key: a 429 problem with ``Retry-After``
+def admit_job(backend: JobBackend, owner: str | None, settings: Settings, body: dict[str, Any]) -> JobRecord:
+    """Admit and submit a job (or a paper report) of ``owner``'s key: a 429 problem with ``Retry-After``
     if the key has ``max_active_jobs_per_key`` active jobs or the queue is full, else the queued job."""
-    backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
-    with _admitted(request, 1, adds_a_job=True) as max_active:
-        if max_active is None:
-            return backend.submit(body, owner)
+    with _admitted(backend, owner, settings, 1, adds_a_job=True) as max_active:
         return backend.submit(body, owner, max_active=max_active)
 
 
-def admit_ensemble(request: Request, spec: dict[str, Any], chunks: list[tuple[int, int]]) -> str:
+def admit_ensemble(backend: JobBackend, owner: str | None, settings: Settings, spec: dict[str, Any],
+                   chunks: list[tuple[int, int]]) -> str:
     """Admit and submit an ensemble: its chunks count against ``max_queued_messages`` (all of them fit
     with what is queued, or a 429 problem with ``Retry-After``); returns the ensemble's id."""
-    backend, owner = request.app.state.backend, getattr(request.state, "owner", None)
-    with _admitted(request, len(chunks), adds_a_job=False):
+    with _admitted(backend, owner, settings, len(chunks), adds_a_job=False):
         ensemble_id, _ = backend.submit_ensemble(spec, chunks, owner)
     return ensemble_id

@@ -17,6 +17,7 @@ from kombu.exceptions import OperationalError
 from sqlalchemy.exc import OperationalError as DatabaseUnavailable
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from nonholonomic.refusals import RefusedField
 from schemas.problems import INTERNAL, INVALID_REQUEST, PROBLEM_MEDIA_TYPE, UNAVAILABLE, FieldError, Problem
 
 log = logging.getLogger(__name__)
@@ -67,6 +68,12 @@ def invalid_request(errors: Sequence[FieldError]) -> ProblemError:
     """A 422 naming every offending field."""
     detail = "; ".join(f"{e.field}: {e.reason}" for e in errors)
     return ProblemError(422, "Invalid request", detail, INVALID_REQUEST, errors)
+
+
+def refused_fields(refusal: RefusedField, block: str = "") -> list[FieldError]:
+    """The fields of a refusal (:mod:`nonholonomic.refusals`), named from ``block`` of the request."""
+    named = refusal.within(block) if block else refusal
+    return [FieldError(field=field, reason=reason) for field, reason in named.problems()]
 
 
 def field_path(loc: Sequence[Any], body: Any) -> str:
@@ -131,6 +138,11 @@ def install_error_handlers(app: FastAPI) -> None:
     async def _problem(request: Request, exc: ProblemError) -> JSONResponse:
         return _respond(exc.problem.model_copy(), request, exc.headers)
 
+    @app.exception_handler(RefusedField)
+    async def _refused(request: Request, exc: RefusedField) -> JSONResponse:
+        """Every refusal of the core, of any layer, as one 422 naming each field."""
+        return _respond(invalid_request(refused_fields(exc)).problem, request)
+
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:
         body = exc.body
@@ -146,7 +158,8 @@ def install_error_handlers(app: FastAPI) -> None:
             if err["type"] in ("union_tag_invalid", "union_tag_not_found"):
                 path += ".kind"  # the discriminator itself is the offending field
                 ctx = err.get("ctx") or {}
-                reason += did_you_mean(str(ctx.get("tag", "")), re.findall(r"'([^']*)'", str(ctx.get("expected_tags", ""))))
+                expected = re.findall(r"'([^']*)'", str(ctx.get("expected_tags", "")))
+                reason += did_you_mean(str(ctx.get("tag", "")), expected)
             errors.append(FieldError(field=path, reason=reason))
         return _respond(invalid_request(errors).problem, request)
 
@@ -168,7 +181,8 @@ def install_error_handlers(app: FastAPI) -> None:
     async def _unavailable(request: Request, exc: Exception) -> JSONResponse:
         log.warning("job store or broker unavailable: %s", str(exc).splitlines()[0] if str(exc) else exc)
         return _respond(Problem(type=UNAVAILABLE, title="Service unavailable", status=503,
-                                detail=f"the job store or broker cannot be reached ({type(exc).__name__}); retry later"),
+                                detail=f"the job store or broker cannot be reached ({type(exc).__name__}); "
+                                       "retry later"),
                         request)
 
     @app.exception_handler(Exception)

@@ -54,7 +54,8 @@ def _describe(system_json: Mapping[str, Any]) -> dict[str, Any]:
     names = {v.name: v.meaning for v in system.state}
     names.update({d.name: f"{d.meaning} ({d.formula})" for d in system.derived})
     if system.reduced_time is not None:
-        names["tau"] = f"reduced time tau, {system.reduced_time.formula} (eq. {system.reduced_time.equation}), tau(0) = 0"
+        tau = system.reduced_time
+        names["tau"] = f"reduced time tau, {tau.formula} (eq. {tau.equation}), tau(0) = 0"
     return names
 
 

@@ -25,6 +25,7 @@ from fastapi import Request
 from fastapi.responses import JSONResponse
 
 from schemas.problems import CONFLICT, FieldError
+from service.backends.base import JobBackend
 from service.errors import ProblemError, invalid_request
 
 HEADER = "Idempotency-Key"
@@ -204,15 +205,17 @@ def _key(request: Request) -> str | None:
     return key
 
 
-def idempotent(request: Request, body: Any, create: Callable[[], tuple[dict[str, Any], dict[str, str]]]) -> JSONResponse:
-    """Answer a creating POST: ``create()`` returns the 202 body and headers. With an ``Idempotency-Key``
-    the first response is stored and a retry gets it again (see the module's docstring)."""
+def idempotent(request: Request, owner: str | None, body: Any,
+               create: Callable[[], tuple[dict[str, Any], dict[str, str]]]) -> JSONResponse:
+    """Answer ``owner``'s creating POST: ``create()`` returns the 202 body and headers. With an
+    ``Idempotency-Key`` the first response is stored and a retry gets it again (see the module's docstring);
+    keys are ``owner``'s own."""
     key = _key(request)
     if key is None:
         content, headers = create()
         return JSONResponse(content, status_code=202, headers=headers)
     store: IdempotencyStore = request.app.state.idempotency
-    slot = f"{getattr(request.state, 'owner', None) or '-'}:{key}"
+    slot = f"{owner or '-'}:{key}"
     mark = fingerprint(request.url.path, body)
     lease_s = request.app.state.settings.idempotency_lease_s
     token = uuid.uuid4().hex
@@ -241,7 +244,7 @@ def idempotent(request: Request, body: Any, create: Callable[[], tuple[dict[str,
     return JSONResponse(content, status_code=202, headers=headers)
 
 
-def idempotency_store(backend: Any, ttl_s: int) -> IdempotencyStore:
+def idempotency_store(backend: JobBackend, ttl_s: int) -> IdempotencyStore:
     """Redis's in queue mode (shared by every API process), else in memory."""
-    client = getattr(backend, "redis", None)
+    client = backend.redis
     return RedisIdempotencyStore(client, ttl_s) if client is not None else MemoryIdempotencyStore(ttl_s)

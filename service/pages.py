@@ -104,8 +104,8 @@ def _refresh(status: str) -> int | None:
 
 
 #: The trajectory plot's caption for a system written by the user (its state is (q, q_dot)).
-TRAJECTORY_CAPTION_OWN = ("the coordinates q in space (the first three) and the velocities q_dot against t (drawn from the "
-                          "integrator's dense output)")
+TRAJECTORY_CAPTION_OWN = ("the coordinates q in space (the first three) and the velocities q_dot against t (drawn "
+                          "from the integrator's dense output)")
 
 
 def job_plots(result: dict[str, Any] | None, status: str = "succeeded") -> list[tuple[str, str]]:

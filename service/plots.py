@@ -523,8 +523,10 @@ def _lyapunov_figure(result: Mapping[str, Any], request: Mapping[str, Any] | Non
                                     if moved else "run longer")) if loose else \
         "converged to within 5 % of max |λ| over the last 20 % of the run"
     ax.set_title(verdict, color="C3" if loose else "0.3")
-    fig.suptitle(_headline(info, f"Lyapunov exponents, finite-time estimates at {finite_time(spectrum, result.get('t_final'))}"
-                                 f" (QR every {spectrum.get('interval', 0):g} s); sum {spectrum.get('sum', float('nan')):.2e} "
+    at = finite_time(spectrum, result.get("t_final"))
+    fig.suptitle(_headline(info, f"Lyapunov exponents, finite-time estimates at {at}"
+                                 f" (QR every {spectrum.get('interval', 0):g} s); "
+                                 f"sum {spectrum.get('sum', float('nan')):.2e} "
                                  + (f"1/s, expected {spectrum['sum_expected']:g}" if spectrum.get("sum_expected")
                                     is not None else "1/s (no measure claimed: no expected sum)")))
     return fig

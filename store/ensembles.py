@@ -108,7 +108,8 @@ class EnsembleStore:
 
     def record(self, ensemble_id: str) -> dict[str, Any] | None:
         """The ensemble's request, chunks, owner, ``cancelled``, and by chunk: ``done`` (a set),
-        ``progress`` (members done, of chunks started and not done), ``digests``, ``workers`` and ``starts``; None if unknown."""
+        ``progress`` (members done, of chunks started and not done), ``digests``, ``workers`` and ``starts``;
+        None if unknown."""
         with self._session() as session:
             row = session.get(EnsembleRow, ensemble_id)
             if row is None:
@@ -130,7 +131,8 @@ class EnsembleStore:
         lookup that costs the same whether the ensemble does not exist or is another owner's."""
         with self._session() as session:
             return session.scalar(select(EnsembleRow.id).where(
-                EnsembleRow.id == ensemble_id, or_(EnsembleRow.owner == owner, EnsembleRow.owner.is_(None)))) is not None
+                EnsembleRow.id == ensemble_id,
+                or_(EnsembleRow.owner == owner, EnsembleRow.owner.is_(None)))) is not None
 
     def spec(self, ensemble_id: str) -> tuple[dict[str, Any], list[tuple[int, int]]] | None:
         """The request and the chunks' member ranges."""

@@ -229,7 +229,8 @@ class JobStore:
         runs elsewhere (do not run it)."""
         return self._changed(
             update(_JOBS).where(_JOBS.c.id == job_id,
-                                or_(_JOBS.c.status == "queued", and_(_JOBS.c.status == "running", _JOBS.c.worker == worker)))
+                                or_(_JOBS.c.status == "queued",
+                                    and_(_JOBS.c.status == "running", _JOBS.c.worker == worker)))
             .values(status="running", worker=worker, attempts=_JOBS.c.attempts + 1))
 
     def finish(self, job_id: str, status: str, result: dict[str, Any] | None = None,
@@ -261,7 +262,8 @@ class JobStore:
         return self._changed(update(_JOBS).where(_JOBS.c.id == job_id, _JOBS.c.status == "queued", epoch)
                              .values(broker_epoch=broker_epoch))
 
-    def sent_before(self, broker_epoch: str, limit: int = 1000) -> list[tuple[str, dict[str, Any], str | None, str | None]]:
+    def sent_before(self, broker_epoch: str,
+                    limit: int = 1000) -> list[tuple[str, dict[str, Any], str | None, str | None]]:
         """Queued jobs sent in another broker epoch (their messages are gone): (id, request, queue, epoch)."""
         with self._session() as session:
             rows = session.execute(select(JobRow.id, JobRow.request, JobRow.queue, JobRow.broker_epoch)

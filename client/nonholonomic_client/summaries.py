@@ -120,9 +120,11 @@ def ensemble_summary(view: Mapping[str, Any]) -> str:
     chaos = summary.get("map")
     if chaos:
         fraction = chaos.get("chaotic_fraction")
-        lines.append(f"  map {chaos.get('cells')} cells: {chaos.get('regular')} regular, {chaos.get('chaotic')} chaotic, "
+        lines.append(f"  map {chaos.get('cells')} cells: {chaos.get('regular')} regular, "
+                     f"{chaos.get('chaotic')} chaotic, "
                      f"{chaos.get('outside')} outside, {chaos.get('failed')} failed; chaotic fraction "
-                     f"{_num(fraction)} (by {chaos.get('status_by')} > {_num((chaos.get('thresholds') or {}).get(chaos.get('status_by')))})")
+                     f"{_num(fraction)} (by {chaos.get('status_by')} > "
+                     f"{_num((chaos.get('thresholds') or {}).get(chaos.get('status_by')))})")
     points = summary.get("section_points")
     if points:
         lines.append(f"  section points {points.get('total')} ({points.get('min_per_member')} .. "

@@ -204,8 +204,10 @@ def _schema(name: str, schema: dict[str, Any], components: dict[str, Any]) -> li
     if props:
         out += ["| field | type | required | description |", "|---|---|---|---|"]
         for field, sub in props.items():
-            out.append(f"| `{field}` | {_cell(_schema_link(sub, components)) if '$ref' not in sub else _schema_link(sub, components)} "
-                       f"| {'yes' if field in required else 'no'} | {_cell(sub.get('description') or sub.get('title'))} |")
+            out.append(f"| `{field}` | "
+                       f"{_cell(_schema_link(sub, components)) if '$ref' not in sub else _schema_link(sub, components)}"
+                       f" | {'yes' if field in required else 'no'} | "
+                       f"{_cell(sub.get('description') or sub.get('title'))} |")
         out.append("")
     elif "enum" in schema:
         out += ["One of " + ", ".join(f"`{json.dumps(v)}`" for v in schema["enum"]) + ".", ""]

@@ -102,7 +102,8 @@ def velocities(kern: NumericSystem, p: np.ndarray, system: MechanicalSystem, rel
 
     dim = basis.shape[2]
     if curved.sum() == 0 and dim == 1:
-        c0, plus, minus = at(np.zeros((len(G), 1)))[:, 0], at(np.ones((len(G), 1)))[:, 0], at(-np.ones((len(G), 1)))[:, 0]
+        c0, plus, minus = (at(np.zeros((len(G), 1)))[:, 0], at(np.ones((len(G), 1)))[:, 0],
+                           at(-np.ones((len(G), 1)))[:, 0])
         t1, t2 = quadratic_roots(c0, (plus - minus) / 2, (plus + minus) / 2 - c0)
         points = [t1[:, None], t2[:, None]]
     elif curved.sum() == 1 and dim == 2:

@@ -195,7 +195,8 @@ class Search:
     wandered: str | None = None
 
 
-def newton(closing: Closing, z: np.ndarray, iterations: int, history: list[float]) -> tuple[np.ndarray, float, str | None]:
+def newton(closing: Closing, z: np.ndarray, iterations: int,
+           history: list[float]) -> tuple[np.ndarray, float, str | None]:
     """Gauss–Newton from ``z``: the best point, its residual and why it stopped wandering (None: converged
     or stagnated at the noise level)."""
     n = closing.system.dimension

@@ -27,26 +27,16 @@ import sympy as sp
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.expressions import ExpressionError, integrable, parse_expression
+from nonholonomic.refusals import RefusedField
 from nonholonomic.taylor import TaylorSystem, taylor_system
 
 _NOT_SMOOTH = re.compile(r"\b(abs|sign)\s*\(")
 
-class SurfaceError(ValueError):
-    """A refused field of a section request.
 
-    Attributes
-    ----------
-    field : the request field: ``"surface"``, ``"value"``, ``"direction"``, ``"coordinates"``,
-        ``"coordinates[i]"``, ``"max_points"``, ``"t_final"``, ``"tolerance"``, ``"initial_state"``,
-        ``"parameters"``.
-    reason : why, in words (for an unknown name it lists the allowed ones).
-    position : 0-based character offset in the surface's text, when there is one.
-    """
-
-    def __init__(self, field: str, reason: str, position: int | None = None) -> None:
-        self.field, self.reason, self.position = field, reason, position
-        where = f" (at position {position})" if position is not None else ""
-        super().__init__(f"{field}: {reason}{where}")
+class SurfaceError(RefusedField):
+    """A refused field of a section request (:class:`nonholonomic.refusals.RefusedField`): ``"surface"``,
+    ``"value"``, ``"direction"``, ``"coordinates"``, ``"coordinates[i]"``, ``"max_points"``, ``"t_final"``,
+    ``"tolerance"``, ``"initial_state"`` or ``"parameters"``; ``position`` points into the surface's text."""
 
 
 # --------------------------------------------------------------------------------------------------

@@ -138,7 +138,8 @@ class _Buffers:
 
 
 def _group(system: MechanicalSystem, cf: hy.cfunc, buffers: _Buffers, runtime: np.ndarray,
-           trajectories: Sequence[Trajectory], counts: list[int], tolerance: float | None) -> list[list[IntegralEvidence]]:
+           trajectories: Sequence[Trajectory], counts: list[int],
+           tolerance: float | None) -> list[list[IntegralEvidence]]:
     """The evidence of a few trajectories (``runtime``: their runtime parameters, one column each)."""
     k, m = len(system.integrals), len(trajectories)
     points, pars, values = buffers.arrays(sum(counts))

@@ -61,8 +61,8 @@ def _to_prove(system: MechanicalSystem, density: sp.Expr) -> tuple[sp.Expr, str]
     where = ""
     if system.measure.on_manifold:  # the claim holds on an invariant manifold: its equations solved first
         bracket = bracket.xreplace(dict(system.measure.on_manifold))
-        where = (" on the invariant manifold (" + ", ".join(f"{s} = {sp.sstr(e)}" for s, e in system.measure.on_manifold)
-                 + ")")
+        where = (" on the invariant manifold ("
+                 + ", ".join(f"{s} = {sp.sstr(e)}" for s, e in system.measure.on_manifold) + ")")
     return bracket, where
 
 

@@ -293,7 +293,7 @@ class _Parser:
                 if v == 0:
                     raise self.at(operand, "division by zero")
                 if self.enclosure.constant(v):
-                    self.certify(operand, lambda: _inverse(self.enclosure.box(v), "the denominator"))
+                    self.certify(operand, lambda v=v: _inverse(self.enclosure.box(v), "the denominator"))
                 v = self.power(v, sp.Integer(-1), operand, operand)
             items.append(v)
         return self.checked((sp.Add if _CHAIN[type(node.op)] == _SUM else sp.Mul)(*items), node)

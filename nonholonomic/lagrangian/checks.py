@@ -57,7 +57,7 @@ def number(expr: sp.Expr, point: dict[sp.Symbol, float]) -> float | None:
 def numeric_matrix(matrix: sp.Matrix, point: dict[sp.Symbol, float]) -> np.ndarray | None:
     """``matrix`` at ``point``; None where an entry is not real and finite there."""
     out = np.empty(matrix.shape)
-    for (i, j), entry in np.ndenumerate(np.empty(matrix.shape)):
+    for (i, j), _entry in np.ndenumerate(np.empty(matrix.shape)):
         value = number(matrix[i, j], point)
         if value is None:
             return None
@@ -177,7 +177,8 @@ def field_problem(data: LagrangianData, q: Sequence[float], qdot: Sequence[float
                                      data.t: 0.0, **dict(values if values is not None else data.parameter_values)}
     M, h, A, Adot_v = dynamics_terms(data)
     Mn, An = numeric_matrix(M, point), numeric_matrix(A, point) if A.shape[0] else np.zeros((0, len(data.q)))
-    hn, dn = numeric_matrix(sp.Matrix(h), point), numeric_matrix(sp.Matrix(Adot_v), point) if Adot_v else np.zeros((0, 1))
+    hn, dn = (numeric_matrix(sp.Matrix(h), point),
+              numeric_matrix(sp.Matrix(Adot_v), point) if Adot_v else np.zeros((0, 1)))
     if Mn is None or An is None or hn is None or dn is None:
         return "L or a constraint is not real and finite there"
     if not regular(Mn):

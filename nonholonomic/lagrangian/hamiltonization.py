@@ -62,7 +62,8 @@ def _reduced_text(reduction: ChaplyginReduction) -> dict[str, Any]:
     data = reduction.data
     assert data is not None
     texts = dict(data.texts)
-    return {"shape": [str(s) for s in data.q], "cyclic_velocities": {str(s): sp.sstr(e) for s, e in reduction.dependent},
+    return {"shape": [str(s) for s in data.q],
+            "cyclic_velocities": {str(s): sp.sstr(e) for s, e in reduction.dependent},
             "L_star": texts["lagrangian"], "U": texts["potential"], "a1": texts["a1"], "a2": texts["a2"],
             "b": texts["b"], "equation": "2704-7"}
 
@@ -142,9 +143,11 @@ def _hamiltonization(data: LagrangianData) -> Hamiltonization:
     reduced_time = ReducedTime(N, f"d tau = N dt, N = {sp.sstr(N)} (Theorem 1, on the Chaplygin reduction)", "2704-8",
                                "s (times N's unit)")
     return Hamiltonization(form, reduced_time, {**summary, "verdict": "found", "reducing_multiplier": sp.sstr(N),
-                                                "hamiltonian_form": form.formula, "reason": "Theorem 1: N solves dN/dq1 = N A2, dN/dq2 = -N A1 (the integrability condition "
-                                                          f"holds){at_values}; the reduced system is the user's field on "
-                                                          f"the constraint manifold ({how})",
+                                                "hamiltonian_form": form.formula,
+                                                "reason": "Theorem 1: N solves dN/dq1 = N A2, dN/dq2 = -N A1 "
+                                                          "(the integrability condition "
+                                                          f"holds){at_values}; the reduced system is the user's "
+                                                          f"field on the constraint manifold ({how})",
                                                 "at_values": bool(at_values)})
 
 

@@ -81,8 +81,8 @@ class Integral:
 @dataclass(frozen=True)
 class IntegralSearch:
     """The outcome of :func:`integral_search`: ``status`` ``done`` (the ansatz searched, all listed proven),
-    ``partial`` (some unproven: a proof past :data:`MAX_PROOF_TERMS`, or a failed lift) or ``undecided`` (not searched); the
-    integrals (the energy first); u; what was searched (``ansatz``, ``basis`` of the coefficient functions,
+    ``partial`` (some unproven: a proof past :data:`MAX_PROOF_TERMS`, or a failed lift) or ``undecided`` (not searched);
+    the integrals (the energy first); u; what was searched (``ansatz``, ``basis`` of the coefficient functions,
     ``degrees`` in u); ``omitted``, the integrals of the ansatz not listed as combinations of 1, the energy
     and products of those listed; ``reason``, which says that absence means "not in this ansatz"."""
 
@@ -185,7 +185,9 @@ class _System:
 
     def proven(self, N, Phi) -> bool:
         """Whether F = N/Φ (Φ a function of q) has dF/dt ≡ 0 on the manifold, modulo sin² + cos² = 1."""
-        along = lambda f: sum((self.d(f, i) * self.qdot[i] for i in range(self.n)), self.R.zero)
+        def along(f):
+            return sum((self.d(f, i) * self.qdot[i] for i in range(self.n)), self.R.zero)
+
         ud = sum((N.diff(g) * f for g, f in zip(self.gu, self.udot)), self.R.zero)
         return self.normal((along(N) * self.delta * self.den + ud) * Phi - N * along(Phi) * self.delta * self.den) == 0
 
@@ -314,7 +316,9 @@ def _solve(sys: _System, basis: list, mus: list, kappas: list, seed: int) -> tup
     if any(pivots != results[0][1] for _, pivots in results):
         raise _Failed("undecided", "the rank of the linear system differs between primes (unlucky points)")
     pivots, out = results[0][1], []
-    monomial = lambda mu: math.prod((g**e for g, e in zip(sys.gu, mu)), start=sys.R.one)
+    def monomial(mu):
+        return math.prod((g**e for g, e in zip(sys.gu, mu)), start=sys.R.one)
+
     for f in sorted(set(range(len(columns))) - set(pivots)):  # x_f = 1, x_pivots = −R[:, f]
         x = _lift([np.bincount([f, *pivots], [1, *(-R[:, f] % p)], len(columns)).astype(np.int64)
                    for (R, _), p in zip(results, PRIMES)])
@@ -415,12 +419,14 @@ def _search(data: LagrangianData) -> tuple:
         else:
             name = f"F{len(integrals) + (sys.E is None)}"
             integrals.append(Integral(name, k, expr, f"{name} = {sp.sstr(expr)}{where}", proof))
-    names = lambda idx: "(" + ", ".join(str(sys.q[i]) for i in idx) + ")"
+    def names(idx):
+        return "(" + ", ".join(str(sys.q[i]) for i in idx) + ")"
+
     trig = names(i for i in sys.trig if cyclic_trig or i not in sys.powers)
     ansatz = (f"F = sum over the monomials u^mu of degree <= 2 in u = {sys.u} of b_mu(q) u^mu / Delta^deg(mu), Delta = "
-              f"{sp.sstr(sys.expr(sys.delta))}, each b_mu in the span of {len(basis)} functions of q: products, of total "
-              f"degree <= {degree}, of powers of {names(sys.powers)} and of 1, cos, sin, sin^2, sin*cos (degrees 0, 1, "
-              f"1, 2, 2) of {trig}; the constant left out; {unknowns} unknowns"
+              f"{sp.sstr(sys.expr(sys.delta))}, each b_mu in the span of {len(basis)} functions of q: products, "
+              f"of total degree <= {degree}, of powers of {names(sys.powers)} and of 1, cos, sin, sin^2, sin*cos "
+              f"(degrees 0, 1, 1, 2, 2) of {trig}; the constant left out; {unknowns} unknowns"
               + (", odd and even parts apart (flow even in u)" if sys.reversible else ""))
     counts = [sum(i.degree == d and i.name != "energy" for i in integrals) for d in (0, 1, 2)]
     reason = (f"listed: {'the energy, ' if sys.E else ''}{counts[1]} linear and {counts[2]} other quadratic "

@@ -229,7 +229,8 @@ def _search_symbolic(data: LagrangianData) -> tuple:
         return fail("undecided", f"the candidate rho = {sp.sstr(rho)}: pointwise residual {residual:.3g} above "
                                  f"{POINTWISE_TOLERANCE:g}")
     reason = (f"rho = {sp.sstr(rho)} in the coordinates (q, u), u = ({', '.join(map(str, u))}): div(rho f)/rho "
-              f"vanishes identically{' (parameters symbolic)' if data.parameters else ''} and pointwise (max relative residual {residual:.1e} at "
+              f"vanishes identically{' (parameters symbolic)' if data.parameters else ''} and pointwise "
+              f"(max relative residual {residual:.1e} at "
               f"{POINTWISE_STATES} random states){note}")
     return "found", rho, u, dependent, reason, residual, time.perf_counter() - start
 
@@ -297,8 +298,8 @@ def _gradient(data: LagrangianData, B: sp.Matrix, c: list[sp.Expr], points, floa
 
 def _rational_antiderivative(expr: sp.Expr, x: sp.Symbol) -> sp.Expr | None:
     """∫ expr dx when expr is a rational function of x, or R(sin x) cos x, or R(cos x) sin x (R rational):
-    by :func:`sympy.integrals.rationaltools.ratint` (Hermite reduction and Lazard–Rioboo–Trager, a bounded algorithm), after the
-    substitution s = sin x or c = cos x; None for any other integrand."""
+    by :func:`sympy.integrals.rationaltools.ratint` (Hermite reduction and Lazard–Rioboo–Trager, a bounded algorithm),
+    after the substitution s = sin x or c = cos x; None for any other integrand."""
     if expr.is_rational_function(x):
         return ratint(sp.cancel(expr), x)
     t = sp.Dummy("t")

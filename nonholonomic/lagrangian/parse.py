@@ -34,6 +34,7 @@ import sympy as sp
 
 from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, smooth_potential
+from nonholonomic.refusals import RefusedField
 from nonholonomic.systems.generalized_chaplygin import velocity_degree
 
 KIND = "lagrangian"
@@ -47,24 +48,12 @@ MAX_COORDINATES = 8
 FIELDS = ("kind", "coordinates", "L", "constraints", "parameters")
 
 
-class DataError(ValueError):
-    """A field of the user's system that cannot be used, with the field's name.
+class DataError(RefusedField):
+    """A field of the user's system that cannot be used (:class:`nonholonomic.refusals.RefusedField`).
 
-    Attributes
-    ----------
-    field : str
-        ``coordinates``, ``L``, ``constraints``, ``constraints[i]`` (0-based), ``parameters`` or
-        ``parameters.<name>``.
-    reason : str
-        What is wrong, in words.
+    ``field`` is ``coordinates``, ``L``, ``constraints``, ``constraints[i]`` (0-based), ``parameters`` or
+    ``parameters.<name>``.
     """
-
-    def __init__(self, field: str, reason: str) -> None:
-        super().__init__(f"{field}: {reason}")
-        self.field, self.reason = field, reason
-
-    def __reduce__(self) -> tuple[Any, ...]:  # picklable for the workers
-        return (DataError, (self.field, self.reason))
 
 
 @dataclass(frozen=True)

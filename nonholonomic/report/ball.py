@@ -92,11 +92,12 @@ def ball_multiplier() -> Row:
                     result.verification.get("method", "pointwise"), str(result.verification.get("detail", ""))[:400])]
     if result.reducing_multiplier is not None:
         rho = ball.measure_density(lf.euler_gamma(sym["theta"], sym["phi"]))
-        ratio = sp.lambdify((sym["theta"], sym["phi"]), (result.reducing_multiplier / rho).subs({**values, **BALL_VALUES}),
-                            "numpy")
+        ratio = sp.lambdify((sym["theta"], sym["phi"]),
+                            (result.reducing_multiplier / rho).subs({**values, **BALL_VALUES}), "numpy")
         r = np.array([ratio(t, f) for t, f in np.random.default_rng(0).uniform(0.2, 2.9, (20, 2))], dtype=float)
         spread = float(np.ptp(r) / np.mean(np.abs(r)))
-        checks.append(Check.at_most(spread, 1e-12, "pointwise", f"N / rho_mu at 20 points: relative spread {spread:.2g}"))
+        checks.append(Check.at_most(spread, 1e-12, "pointwise",
+                                    f"N / rho_mu at 20 points: relative spread {spread:.2g}"))
     return Row(claim, checks)
 
 
@@ -207,7 +208,8 @@ def hamiltonian_in_angles() -> Row:
     claim = Claim(SECTION, "The Hamiltonian in (theta, phi, p_theta, p_phi) equals the energy "
                   "1/2 (L, adj(I_Q) L) with L = L(p)", "theorem after 007",
                   printed="H with the printed coefficients of p_theta^2, p_phi^2, p_theta p_phi, c p_phi, c^2",
-                  corrected=("H = 1/2 p_theta^2 (I3 I12 + D G) + 1/2 (p_phi^2 / sin^2) (I1 I2 sin^2 + I3 I21 cos^2 + D G)"
+                  corrected=("H = 1/2 p_theta^2 (I3 I12 + D G) "
+                             "+ 1/2 (p_phi^2 / sin^2) (I1 I2 sin^2 + I3 I21 cos^2 + D G)"
                              " + ... (ERRATA 7)"), errata="ERRATA 7")
     IQ = ball.contact_inertia(lf.euler_gamma())
     L = lf.ball_L_from_momenta()
@@ -240,4 +242,5 @@ def theorem_3() -> Row:
 
 
 ROWS: list[Callable[[], Row]] = [theorem_1, bracket_2704_9, monopole, integrals, measure, integral_F, bracket,
-                                 hamiltonian_form_row, ball_multiplier, local_forms, s_bar_007, hamiltonian_in_angles, theorem_3]
+                                 hamiltonian_form_row, ball_multiplier, local_forms, s_bar_007, hamiltonian_in_angles,
+                                 theorem_3]

@@ -100,7 +100,8 @@ def quadric_energy() -> Row:
         energy = {i.name: i for i in integral_evidence(system, p, integrate(system, p, y0, 20.0, 101, engine=engine))}
         drift[name] = energy["energy"]
     return Row(claim, [Check(drift["derived"].passed, drift["derived"].max_rel_drift, drift["derived"].tolerance,
-                             "trajectory", f"energy drift over t = 20, U = (a, x): {drift['derived'].max_rel_drift:.2g}")],
+                             "trajectory",
+                             f"energy drift over t = 20, U = (a, x): {drift['derived'].max_rel_drift:.2g}")],
                printed_check=Check(drift["printed"].passed, drift["printed"].max_rel_drift, drift["printed"].tolerance,
                                    "trajectory", f"with the printed torque: {drift['printed'].max_rel_drift:.3g}"))
 

@@ -161,7 +161,8 @@ def _e3_form_rows() -> tuple[Check, Check]:
     proven, detail = symbolic_flow_identity(form, system)
     res = flow_residual(form, system, X, p)
     return proof(proven, detail), Check.at_most(res, 1e-12, "pointwise",
-                                                f"max |pushforward / N - {{H, x}}| / max |{{H, x}}| along t <= 100: {res:.2g}")
+                                                f"max |pushforward / N - {{H, x}}| / max |{{H, x}}| "
+                                                f"along t <= 100: {res:.2g}")
 
 
 @claim_id("veselova.e3")
@@ -246,7 +247,8 @@ def _printed_2504_13() -> sp.Matrix:
     s, L, I = clebsch.s, clebsch.L, clebsch.inertia
     k, a, b, c = clebsch.k, clebsch.alpha, clebsch.beta, clebsch.c
     s_dot = k * (a * s.cross(L) + b * s.cross(I * L))
-    L_dot = k * (a * c * s.cross(I * s) + b * (L.cross(I * L) - c * clebsch.det_inertia * s.cross(clebsch.inertia_inv * s)))
+    L_dot = k * (a * c * s.cross(I * s)
+                 + b * (L.cross(I * L) - c * clebsch.det_inertia * s.cross(clebsch.inertia_inv * s)))
     return sp.Matrix.vstack(s_dot, L_dot)
 
 
@@ -254,11 +256,13 @@ def _printed_2504_13() -> sp.Matrix:
 def clebsch_hamiltonian() -> Row:
     claim = Claim(SECTION, "The Hamiltonian after Proposition 1 generates the field "
                   "(2504-13) on e(3)", "after Proposition 1",
-                  printed="H = k alpha (M^2/2 + c/2 (Gamma, I Gamma)) + k beta ((M, I M)/2 - c/2 det I (Gamma, I Gamma))",
+                  printed="H = k alpha (M^2/2 + c/2 (Gamma, I Gamma)) "
+                          "+ k beta ((M, I M)/2 - c/2 det I (Gamma, I Gamma))",
                   corrected="beta part -c/2 det I (Gamma, I^-1 Gamma)", errata="new (not in ERRATA)")
     target = _printed_2504_13()
     checks = []
-    for label, beta_part in (("corrected", clebsch.hamiltonian_beta()), ("printed", clebsch.printed_hamiltonian_beta())):
+    for label, beta_part in (("corrected", clebsch.hamiltonian_beta()),
+                             ("printed", clebsch.printed_hamiltonian_beta())):
         H = clebsch.k * (clebsch.alpha * clebsch.hamiltonian_alpha() + clebsch.beta * beta_part)
         diff = (sp.Matrix(clebsch.kirchhoff_equations(H)) - target).expand()
         nonzero = sum(1 for e in diff if e != 0)

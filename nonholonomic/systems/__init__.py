@@ -8,7 +8,7 @@ A kind whose geometry the user writes (``ball_on_surface``: the surface Φ) also
 
 from __future__ import annotations
 
-from functools import cache, lru_cache
+from functools import cache
 from types import ModuleType
 
 from nonholonomic.definition import MechanicalSystem

@@ -120,7 +120,8 @@ def _projections(data: LagrangianData) -> tuple[Projection, ...]:
 def _measure(data: LagrangianData) -> tuple[InvariantMeasure, dict[str, Any]]:
     """The invariant measure the search proves (or none claimed, with the verdict), and the verdict as JSON."""
     verdict = measure_verdict(data)
-    summary: dict[str, Any] = {"verdict": verdict.status, "reason": verdict.reason, "seconds": round(verdict.seconds, 3),
+    summary: dict[str, Any] = {"verdict": verdict.status, "reason": verdict.reason,
+                               "seconds": round(verdict.seconds, 3),
                                "independent_velocities": [str(u) for u in verdict.velocities],
                                "dependent_velocities": {str(s): sp.sstr(e) for s, e in verdict.dependent}}
     if verdict.status != "found" or verdict.density is None:

@@ -36,6 +36,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from nonholonomic.lagrangian.parse import KIND
+
 #: The rattleback's inertia in the curvature frame, (A, B, C, D) [kg m^2] (Garcia & Hubbard's kind of body):
 #: principal moments I1, I2 in the horizontal plane at the angle δ, I3 about the vertical axis.
 _A, _B, _C, _D = 2e-4, 1.6e-3, 1.7e-3, 2e-5
@@ -52,8 +54,6 @@ _W1 = "(alpha_dot*cos(beta) - psi_dot*sin(beta)*cos(alpha))"
 _W2 = "(beta_dot + psi_dot*sin(alpha))"
 _W3 = "(alpha_dot*sin(beta) + psi_dot*cos(alpha)*cos(beta))"
 _SPIN = "(psi_dot + beta_dot*sin(alpha))"
-
-from nonholonomic.lagrangian.parse import KIND
 
 __all__ = ["CLASSICS"]
 
@@ -167,13 +167,15 @@ CLASSICS: dict[str, dict[str, Any]] = {
                            "L": (f"m/2*(x_dot**2 + y_dot**2 + (alpha_dot*{_ZA} + beta_dot*cos(alpha)*{_ZB})**2)"
                                  f" + I1/2*(cos(delta)*{_W1} + sin(delta)*{_W2})**2"
                                  f" + I2/2*(cos(delta)*{_W2} - sin(delta)*{_W1})**2 + I3/2*{_W3}**2 - m*g*{_Z}"),
-                           "constraints": [f"cos(psi)*x_dot + sin(psi)*y_dot - beta_dot*cos(alpha)*{_Z} + {_SPIN}*{_ZA}",
+                           "constraints": [f"cos(psi)*x_dot + sin(psi)*y_dot - beta_dot*cos(alpha)*{_Z} "
+                                           f"+ {_SPIN}*{_ZA}",
                                            f"-sin(psi)*x_dot + cos(psi)*y_dot + alpha_dot*{_Z} + {_SPIN}*{_ZB}"],
                            "parameters": _RATTLEBACK_PARAMETERS},
                 "initial_state": {"q": [0.0, 0.0, 0.0, 0.0, 0.0], "q_dot": [0.0, -0.01 * 0.01, 5.0, 0.01, 0.0]},
                 "t_final": 12.0, "samples": 121, "checks": ["integrals"]},
         "facts": ["spun at psi_dot = +5 rad/s with a small rocking (alpha_dot = 0.01), the vertical spin "
-                  "psi_dot + beta_dot sin(alpha) turns to about -5 rad/s within 10 s (below -4 at t = 12); spun at -5 rad/s it "
+                  "psi_dot + beta_dot sin(alpha) turns to about -5 rad/s within 10 s (below -4 at t = 12); "
+                  "spun at -5 rad/s it "
                   "keeps its sense over these 12 s (without dissipation it too turns, about ten times slower: its "
                   "instability grows at 0.04 |omega| against 0.42 omega, the turn comes near t = 22 s)",
                   "energy and both rolling constraints conserved",

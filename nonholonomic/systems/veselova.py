@@ -104,7 +104,8 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
     ]
     if pot.kind == "zero":
         Iw_x_g = cross(inertia * omega, gamma)
-        integrals.append(FirstIntegral("F", dot(Iw_x_g, Iw_x_g), dot(inertia * omega, inertia * omega) * dot(gamma, gamma),
+        integrals.append(FirstIntegral("F", dot(Iw_x_g, Iw_x_g),
+                                       dot(inertia * omega, inertia * omega) * dot(gamma, gamma),
                                        "F = |I omega x gamma|^2", "2504-5"))
     return MechanicalSystem(
         kind=KIND,

@@ -137,4 +137,5 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
     )
 
 
-__all__ = ["KIND", "TITLE", "PARAMETERS", "POTENTIALS", "POTENTIAL_VARIABLES", "STATE", "EXAMPLE", "define", "I1", "I2", "I3"]
+__all__ = ["KIND", "TITLE", "PARAMETERS", "POTENTIALS", "POTENTIAL_VARIABLES", "STATE", "EXAMPLE", "define",
+           "I1", "I2", "I3"]

@@ -6,10 +6,14 @@ import base64
 import binascii
 import json
 import math
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from store.ensembles import EnsembleStore
+
+if TYPE_CHECKING:
+    import redis
 
 
 @dataclass
@@ -65,15 +69,33 @@ def decode_cursor(cursor: str) -> tuple[float, str]:
 
 
 class JobBackend(Protocol):
+    """Everything the API asks of a job backend (:mod:`service.backends.embedded`, :mod:`service.backends.queue`).
+
+    Routes get the backend through :data:`service.deps.Backend`; nothing outside this interface is probed.
+    """
+
     mode: str
     #: Where ensembles' records and member results live.
     ensembles: EnsembleStore
+    #: The Redis every API process shares (queue mode: idempotency keys live there), None in embedded mode.
+    redis: redis.Redis | None
 
-    def submit(self, request: dict[str, Any], owner: str | None = None) -> JobRecord:
-        """Accept a validated request (of ``owner``'s key); returns the queued job."""
+    def submit(self, request: dict[str, Any], owner: str | None = None,
+               max_active: int | None = None) -> JobRecord:
+        """Accept a validated request (of ``owner``'s key); returns the queued job. With ``max_active``,
+        the owner's active jobs are counted and the job recorded in one atomic step: raises
+        :class:`store.jobs.ActiveBoundReached` (nothing recorded) when the owner has ``max_active`` already."""
+
+    def reserve_messages(self, messages: int, bound: int) -> AbstractContextManager[None]:
+        """Hold room for ``messages`` more in the queue while the body sends them (at most ``bound`` queued
+        and being sent, kept atomically across API processes); raises :class:`QueueFull` if there is none."""
 
     def get(self, job_id: str) -> JobRecord | None:
         """The job, or None if this service never accepted that id."""
+
+    def find(self, job_id: str, owner: str | None) -> JobRecord | None:
+        """The job if ``owner`` may see it (:func:`service.access.visible`; None: keys are off), else None.
+        An unknown id and another owner's job cost the same work, so a 404's timing tells nothing."""
 
     def cancel(self, job_id: str) -> JobRecord | None:
         """Ask the job to stop; returns it (None if unknown)."""
@@ -100,12 +122,6 @@ class JobBackend(Protocol):
 
     def queued_messages(self) -> int:
         """Jobs and ensemble chunks waiting to start."""
-
-    # A backend shared by several API processes (queue mode) also keeps the bounds atomically, with
-    # ``atomic_admission = True`` (see :mod:`service.admission`; others are admitted under a process lock):
-    #   submit(request, owner, max_active=n) raises store.jobs.ActiveBoundReached when the owner has n active
-    #   jobs, counted and recorded under one lock; reserve_messages(n, bound) is a context manager that
-    #   holds room for n messages in the queue while they are sent, or raises QueueFull.
 
     def health(self) -> dict[str, Any]:
         """Status of the parts this backend depends on; ``ok`` is False if jobs cannot run."""

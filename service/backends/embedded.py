@@ -16,15 +16,17 @@ import logging
 import threading
 import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
 from nonholonomic.integration import IntegrationCancelled
 from schemas.settings import Settings
-from service.backends.base import JobRecord, decode_cursor, encode_cursor
+from service.backends.base import JobRecord, QueueFull, decode_cursor, encode_cursor
 from service.backends.job_threads import JobThreads
 from store.ensembles import EnsembleStore
-from store.jobs import JobStore, StoredJob
+from store.jobs import ActiveBoundReached, JobStore, StoredJob
 from workers.ensembles import run_ensemble_chunk
 from workers.jobs import WarmUp, run_job, warm_up
 from workers.limits import Deadline, JobTimeout, soft_limit_message
@@ -69,6 +71,8 @@ class EmbeddedBackend:
     """
 
     mode = "embedded"
+    #: Idempotency keys live in the API process (one API process: nothing to share).
+    redis = None
 
     def __init__(self, settings: Settings) -> None:
         self.store = JobStore(settings.store_url, settings.job_ttl_s)
@@ -76,6 +80,8 @@ class EmbeddedBackend:
         self._progress: dict[str, float] = {}
         self._cancel: dict[str, threading.Event] = {}
         self._lock = threading.Lock()
+        #: Admissions one at a time (one API process): counted and recorded under this lock.
+        self._admission = threading.RLock()
         self._threads = settings.embedded_workers
         self._soft_limit_s, self._hard_limit_s = settings.job_soft_time_limit_s, settings.job_time_limit_s
         self._running: dict[str, _Running] = {}
@@ -110,11 +116,27 @@ class EmbeddedBackend:
             self._progress[job_id] = 0.0
         self._pool.submit(self._run, job_id)
 
-    def submit(self, request: dict[str, Any], owner: str | None = None) -> JobRecord:
+    def submit(self, request: dict[str, Any], owner: str | None = None,
+               max_active: int | None = None) -> JobRecord:
         job_id = str(uuid.uuid4())
-        created_at = self.store.create(job_id, request, owner)
+        with self._admission:
+            if max_active is not None and owner is not None:
+                active = self.store.active_count(owner)
+                if active >= max_active:
+                    raise ActiveBoundReached(active)
+            created_at = self.store.create(job_id, request, owner)
         self._enqueue(job_id)
         return JobRecord(job_id, "queued", 0.0, created_at, request, owner=owner)
+
+    @contextmanager
+    def reserve_messages(self, messages: int, bound: int) -> Iterator[None]:
+        """Admit ``messages`` more if the queue stays within ``bound``, else raise :class:`QueueFull`; the
+        body sends them while other admissions wait (one API process: a lock is atomic enough)."""
+        with self._admission:
+            waiting = self.queued_messages()
+            if waiting + messages > bound:
+                raise QueueFull(waiting)
+            yield
 
     def _run(self, job_id: str) -> None:
         cancelled = self._cancel[job_id]
@@ -214,6 +236,13 @@ class EmbeddedBackend:
         progress = 1.0 if job.status == "succeeded" else self._progress.get(job.id, 0.0)
         return JobRecord(job.id, job.status, progress, job.created_at, job.request, result=job.result,
                          error=job.error, owner=job.owner)
+
+    def find(self, job_id: str, owner: str | None) -> JobRecord | None:
+        """The job if ``owner`` may see it, else None: the visibility is asked first, in one lookup that
+        costs the same for an unknown id and another owner's job (the record is read only when visible)."""
+        if owner is not None and not self.store.visible(job_id, owner):
+            return None
+        return self.get(job_id)
 
     def get(self, job_id: str) -> JobRecord | None:
         job = self.store.get(job_id)

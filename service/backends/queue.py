@@ -88,8 +88,6 @@ class QueueBackend:
     ``settings.queue``; workers write their ends and results to the store, progress through Celery."""
 
     mode = "queue"
-    #: The bounds are kept by :meth:`submit` and :meth:`reserve_messages` (see :mod:`service.admission`).
-    atomic_admission = True
 
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
@@ -214,7 +212,8 @@ class QueueBackend:
             except redis.RedisError:  # the broker is away: the store still answers
                 pass
         jobs, more = self.store.page(status, limit, after, owner)
-        return [self._record(j, progress=False) for j in jobs], encode_cursor(jobs[-1].created, jobs[-1].id) if more else None
+        next_cursor = encode_cursor(jobs[-1].created, jobs[-1].id) if more else None
+        return [self._record(j, progress=False) for j in jobs], next_cursor
 
     def cancel(self, job_id: str) -> JobRecord | None:
         """A queued job never starts (the store says cancelled; the worker also drops a revoked message);

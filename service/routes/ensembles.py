@@ -12,7 +12,7 @@ from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView, M
 from schemas.problems import CONFLICT
 from service.access import ensemble_of
 from service.admission import admit_ensemble
-from service.backends import JobBackend
+from service.deps import AppSettings, Backend, Owner
 from service.ensembles import all_members, members_page, section_csv, section_netcdf, section_npz, view
 from service.errors import (
     INVALID,
@@ -33,19 +33,12 @@ _ERRORS: dict[int | str, dict[str, Any]] = problem_responses({404: "unknown ense
 MAX_PAGE = 1000
 
 
-def _backend(request: Request) -> JobBackend:
-    return request.app.state.backend
-
-
-def _record(request: Request, ensemble_id: str) -> dict[str, Any]:
-    return ensemble_of(request, ensemble_id)
-
-
 @router.post("", status_code=202, operation_id="ensembles-submit", response_model=EnsembleAccepted,
              responses=problem_responses({409: IDEMPOTENCY_IN_PROGRESS, 422: INVALID + IDEMPOTENCY_MISMATCH,
                                           429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND + POOL_FULL}),
              summary="Submit an ensemble (members from a list, a level set or a parameter sweep)")
-async def submit_ensemble(body: EnsembleRequest, request: Request) -> JSONResponse:
+async def submit_ensemble(body: EnsembleRequest, request: Request, backend: Backend, owner: Owner,
+                          settings: AppSettings) -> JSONResponse:
     """Every member is validated before anything is queued (expressions by deterministic size measures, then
     read off the event loop); then the chunks go to the workers."""
     chunks = await validated(request, "ensemble", body)
@@ -55,30 +48,30 @@ async def submit_ensemble(body: EnsembleRequest, request: Request) -> JSONRespon
     spec = body.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        ensemble_id = admit_ensemble(request, spec, chunks)
+        ensemble_id = admit_ensemble(backend, owner, settings, spec, chunks)
         location = f"/v1/ensembles/{ensemble_id}"
         accepted = EnsembleAccepted(id=ensemble_id, status="queued", location=location, members=body.members.count,
                                     chunks=len(chunks))
         return accepted.model_dump(), {"Location": location}
 
-    return await run_in_threadpool(idempotent, request, spec, create)
+    return await run_in_threadpool(idempotent, request, owner, spec, create)
 
 
 @router.get("/{ensemble_id}", operation_id="ensembles-get", response_model=EnsembleView, responses=_ERRORS,
             summary="Status, progress (members done / total) and summary of an ensemble")
-def get_ensemble(ensemble_id: str, request: Request) -> JSONResponse:
-    return JSONResponse(view(ensemble_id, _record(request, ensemble_id)))
+def get_ensemble(ensemble_id: str, backend: Backend, owner: Owner) -> JSONResponse:
+    return JSONResponse(view(ensemble_id, ensemble_of(backend, owner, ensemble_id)))
 
 
 @router.get("/{ensemble_id}/members", operation_id="ensembles-members", response_model=MembersPage,
             responses={**_ERRORS, **problem_responses({422: f"offset < 0, or limit outside 1 .. {MAX_PAGE}"})},
             summary="A page of member results")
-def get_members(ensemble_id: str, request: Request, offset: int = Query(0, ge=0),
+def get_members(ensemble_id: str, backend: Backend, owner: Owner, offset: int = Query(0, ge=0),
                 limit: int = Query(100, ge=1, le=MAX_PAGE)) -> JSONResponse:
     """Members ``offset .. offset + limit - 1`` that are done, each with its index, label, status and
     the same result fields as a job."""
-    record = _record(request, ensemble_id)
-    page = members_page(_backend(request).ensembles, ensemble_id, record, offset, limit)
+    record = ensemble_of(backend, owner, ensemble_id)
+    page = members_page(backend.ensembles, ensemble_id, record, offset, limit)
     total = sum(stop - start for start, stop in record["chunks"])
     return JSONResponse({"offset": offset, "limit": limit, "total": total, "members": page})
 
@@ -89,15 +82,15 @@ def get_members(ensemble_id: str, request: Request, offset: int = Query(0, ge=0)
                        **_ERRORS, **problem_responses({409: "the ensemble asked for no section",
                                                        422: "unknown format"})},
             summary="Every member's Poincare crossings, with the member index (CSV, NPZ or NetCDF)")
-def get_section(ensemble_id: str, request: Request,
+def get_section(ensemble_id: str, request: Request, backend: Backend, owner: Owner,
                 format: Literal["csv", "npz", "netcdf"] = Query(  # noqa: A002
                     "csv", description="csv (member, then t, tau and every component, a header with units), npz "
                                        "or netcdf (dimension crossing; coordinates member, t, tau)")) -> Response:
     """The members done so far, in index order, each member's crossings in time order."""
-    record = _record(request, ensemble_id)
+    record = ensemble_of(backend, owner, ensemble_id)
     if not record["request"].get("poincare"):
         raise ProblemError(409, "No section", "this ensemble did not ask for a poincare section", CONFLICT)
-    store = _backend(request).ensembles
+    store = backend.ensembles
     filename = f"ensemble-{ensemble_id}-poincare.{SUFFIXES[format]}"  # the id as a safe name
     if format == "csv":
         return download(request, section_csv(store, ensemble_id, record), MEDIA_TYPES[format], filename)
@@ -112,7 +105,7 @@ def get_section(ensemble_id: str, request: Request,
                                             "(format=netcdf)"),
                        **_ERRORS, **problem_responses({409: "the ensemble is not a chaos map", 422: "unknown format"})},
             summary="A chaos map's cells: status, indicators and integral drift on the grid (CSV, JSON or NetCDF)")
-def get_map(ensemble_id: str, request: Request,
+def get_map(ensemble_id: str, request: Request, backend: Backend, owner: Owner,
             format: Literal["csv", "json", "netcdf"] = Query(  # noqa: A002
                 "csv", description="csv (one row per cell: i, j, the coordinates, status, branches, each indicator, "
                                    "each integral's drift; a header with units), json (2-D arrays [i][j]) or netcdf "
@@ -120,11 +113,11 @@ def get_map(ensemble_id: str, request: Request,
     """Cells of unfinished chunks are ``outside`` with empty values until their chunk is done."""
     from service.map_exports import map_csv, map_json, map_netcdf
 
-    record = _record(request, ensemble_id)
+    record = ensemble_of(backend, owner, ensemble_id)
     if not record["request"].get("indicators"):
         raise ProblemError(409, "Not a map", "this ensemble is not a chaos map (no members.grid and indicators)",
                            CONFLICT)
-    store = _backend(request).ensembles
+    store = backend.ensembles
     members = all_members(store, ensemble_id, record)
     filename = f"ensemble-{ensemble_id}-map.{SUFFIXES[format]}"
     if format == "csv":
@@ -138,11 +131,11 @@ def get_map(ensemble_id: str, request: Request,
 @router.delete("/{ensemble_id}", status_code=202, operation_id="ensembles-cancel", response_model=EnsembleView,
                responses={**_ERRORS, **problem_responses({409: "the ensemble already finished"})},
                summary="Cancel every chunk of an ensemble")
-def cancel_ensemble(ensemble_id: str, request: Request) -> JSONResponse:
-    record = _record(request, ensemble_id)
+def cancel_ensemble(ensemble_id: str, backend: Backend, owner: Owner) -> JSONResponse:
+    record = ensemble_of(backend, owner, ensemble_id)
     before = view(ensemble_id, record)
     if before["status"] in ("succeeded", "failed"):
         raise ProblemError(409, "Ensemble already finished", f"ensemble {ensemble_id} already {before['status']}",
                            CONFLICT)
-    _backend(request).cancel_ensemble(ensemble_id)
-    return JSONResponse(view(ensemble_id, _record(request, ensemble_id)), status_code=202)
+    backend.cancel_ensemble(ensemble_id)
+    return JSONResponse(view(ensemble_id, ensemble_of(backend, owner, ensemble_id)), status_code=202)

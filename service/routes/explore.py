@@ -112,7 +112,8 @@ def explore_orbit_get(run_id: str, request: Request, since: int = Query(0, ge=0)
     if run is None:
         raise ProblemError(404, "Unknown run", f"no exploration {run_id} (the last 64 are kept)", NOT_FOUND)
     points = run.points[since:]
-    return {"id": run.id, "coordinate_names": list(run.coordinates), "initial_state": named_state(run.system, run.state),
+    return {"id": run.id, "coordinate_names": list(run.coordinates),
+            "initial_state": named_state(run.system, run.state),
             "branches": run.branches, "since": since, "points": points, "count": since + len(points),
             "done": run.done and since + len(points) >= len(run.points), "error": run.error,
             "t_reached": run.t_reached, "t_final": run.t_final, "max_points": run.max_points}
@@ -132,7 +133,7 @@ async def explore_periodic(body: ExplorePeriodicRequest) -> dict[str, Any]:
                                         period=body.period, level=tuple(plane.level) if plane.level else None,
                                         coordinates=tuple(plane.coordinates), t_final=body.t_final)
         except PeriodicOrbitError as exc:
-            raise invalid_request([FieldError(field=f"section.{exc.field}", reason=exc.reason)]) from None
+            raise exc.within("section") from None  # a 422 (service.errors)
         except IntegrationError as exc:
             raise invalid_request([FieldError(field="point", reason=f"the integration from this point failed: "
                                                                     f"{exc}")]) from None

@@ -15,8 +15,9 @@ from schemas.problems import CONFLICT, NOT_FOUND, FieldError
 from schemas.results import TrajectoryExport
 from service.access import job_of
 from service.admission import admit_job
-from service.backends import JobBackend, JobRecord
+from service.backends import JobRecord
 from service.backends.base import InvalidCursor
+from service.deps import AppSettings, Backend, Owner
 from service.errors import (
     INVALID,
     UNAVAILABLE_BACKEND,
@@ -46,10 +47,6 @@ router = APIRouter(prefix="/v1/jobs", tags=["jobs"], generate_unique_id_function
 _ERRORS: dict[int | str, dict[str, Any]] = problem_responses({404: "unknown job id", 503: UNAVAILABLE_BACKEND})
 
 
-def _backend(request: Request) -> JobBackend:
-    return request.app.state.backend
-
-
 def _view(record: JobRecord, trajectory: bool = True) -> dict[str, Any]:
     """The job as JSON; ``trajectory=False``: the summary view, a simulation's samples left out of
     ``result`` (``result.trajectory_location`` says where they are)."""
@@ -65,7 +62,8 @@ def _view(record: JobRecord, trajectory: bool = True) -> dict[str, Any]:
              responses=problem_responses({409: IDEMPOTENCY_IN_PROGRESS, 422: INVALID + IDEMPOTENCY_MISMATCH,
                                           429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND + POOL_FULL}),
              summary="Submit a simulation job")
-async def submit_job(job: JobRequest, request: Request) -> JSONResponse:
+async def submit_job(job: JobRequest, request: Request, backend: Backend, owner: Owner,
+                     settings: AppSettings) -> JSONResponse:
     """Validate (shape, ranges, |γ| = 1, state names; expressions by deterministic size measures, then read
     off the event loop) and queue; nothing is queued if invalid. With an ``Idempotency-Key`` a retry answers the
     first response again."""
@@ -73,20 +71,21 @@ async def submit_job(job: JobRequest, request: Request) -> JSONResponse:
     body = job.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        record = admit_job(request, body)
+        record = admit_job(backend, owner, settings, body)
         location = f"/v1/jobs/{record.id}"
         return JobAccepted(id=record.id, status="queued", location=location).model_dump(), {"Location": location}
 
-    return await run_in_threadpool(idempotent, request, body, create)
+    return await run_in_threadpool(idempotent, request, owner, body, create)
 
 
 @router.get("/{job_id}", operation_id="jobs-get", response_model=JobView, responses=_ERRORS,
             summary="Status, progress and result of a job")
-def get_job(job_id: str, request: Request,
+def get_job(job_id: str, backend: Backend, owner: Owner,
             trajectory: bool = Query(True, description="false: the summary view, without the sampled trajectory "
-                                                       "(result.trajectory_location says where it is)")) -> JSONResponse:
+                                                       "(result.trajectory_location says where it is)"),
+            ) -> JSONResponse:
     """The job; a finished simulation's whole result, samples included, unless ``trajectory=false``."""
-    return JSONResponse(_view(job_of(request, job_id), trajectory))
+    return JSONResponse(_view(job_of(backend, owner, job_id), trajectory))
 
 
 #: The formats of a download (``?format=``): JSON, or a file (:data:`service.exports.MEDIA_TYPES`).
@@ -98,8 +97,8 @@ _FORMAT = Query("json", description="json (the default), csv (a header row namin
 _FILE_TYPES = tuple(MEDIA_TYPES.values())
 
 
-def _succeeded(request: Request, job_id: str, what: str) -> JobRecord:
-    record = job_of(request, job_id)
+def _succeeded(backend: Backend, owner: Owner, job_id: str, what: str) -> JobRecord:
+    record = job_of(backend, owner, job_id)
     if record.status != "succeeded" or record.result is None:
         raise ProblemError(409, f"No {what} yet", f"job {job_id} is {record.status}; its {what} is there once "
                                                   "it succeeded", CONFLICT)
@@ -115,11 +114,12 @@ def _succeeded(request: Request, job_id: str, what: str) -> JobRecord:
                                                                         "paper report",
                                             422: "unknown format", 503: UNAVAILABLE_BACKEND})},
             summary="The sampled trajectory as JSON, CSV (a header with units; t and tau first), NPZ or NetCDF")
-def get_trajectory(job_id: str, request: Request, format: ExportFormat = _FORMAT) -> Response:  # noqa: A002
+def get_trajectory(job_id: str, request: Request, backend: Backend, owner: Owner,
+                   format: ExportFormat = _FORMAT) -> Response:  # noqa: A002
     """CSV columns: ``t [s]``, ``tau [unit]`` (systems with a reduced time), then every component of every
     state and derived vector, ``M1 [kg m^2/s]`` ... NetCDF: dimension ``t``, coordinates ``t`` and ``tau``,
     one variable per component named as the CSV's columns (``M1`` ...) with ``units`` and ``long_name``."""
-    record = _succeeded(request, job_id, "trajectory")
+    record = _succeeded(backend, owner, job_id, "trajectory")
     result = record.result
     assert result is not None
     filename = f"job-{job_id}-trajectory.{SUFFIXES[format]}"  # the id as a safe name
@@ -143,13 +143,14 @@ def get_trajectory(job_id: str, request: Request, format: ExportFormat = _FORMAT
                                             422: "unknown format", 503: UNAVAILABLE_BACKEND})},
             summary="The job's Poincare crossings as JSON, CSV (one row per crossing: t, tau, every state "
                     "component), NPZ or NetCDF")
-def get_section(job_id: str, request: Request, format: ExportFormat = _FORMAT) -> Response:  # noqa: A002
+def get_section(job_id: str, request: Request, backend: Backend, owner: Owner,
+                format: ExportFormat = _FORMAT) -> Response:  # noqa: A002
     """The section a job asked for (``poincare`` in the request), one row per crossing in time order. CSV
     columns as the trajectory's: ``t [s]``, ``tau [unit]``, then every component of every state and derived
     vector at the crossing (``M1 [kg m^2/s]`` ... ``gamma3 [1]`` ... ``omega3 [rad/s]``). NPZ: ``t``, ``tau``,
     each vector ``(count, 3)``, ``coordinates`` ``(count, 2)``, ``units_json``, ``request_json``,
     ``versions_json``, ``section_json``. NetCDF: dimension ``crossing``, coordinates ``t`` and ``tau``."""
-    record = _succeeded(request, job_id, "section")
+    record = _succeeded(backend, owner, job_id, "section")
     result = record.result
     assert result is not None
     if not result.get("poincare"):
@@ -172,12 +173,12 @@ def get_section(job_id: str, request: Request, format: ExportFormat = _FORMAT) -
 @router.delete("/{job_id}", status_code=202, operation_id="jobs-cancel", response_model=JobView,
                responses={**_ERRORS, **problem_responses({409: "the job already finished"})},
                summary="Cancel a job (202 with the job's view)")
-def cancel_job(job_id: str, request: Request) -> JSONResponse:
+def cancel_job(job_id: str, backend: Backend, owner: Owner) -> JSONResponse:
     """A queued job never starts; a running one stops at its next progress report (≤ 0.2 s)."""
-    before = job_of(request, job_id)
+    before = job_of(backend, owner, job_id)
     if before.status in ("succeeded", "failed"):
         raise ProblemError(409, "Job already finished", f"job {job_id} already {before.status}", CONFLICT)
-    after = _backend(request).cancel(job_id)
+    after = backend.cancel(job_id)
     if after is None:
         raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
     return JSONResponse(_view(after), status_code=202)
@@ -187,7 +188,7 @@ def cancel_job(job_id: str, request: Request) -> JSONResponse:
             responses=problem_responses({422: "invalid `status`, `limit` or `cursor`; `errors` names the field",
                                          503: UNAVAILABLE_BACKEND}),
             summary="List jobs, newest first (no results; page with next_cursor)")
-def list_jobs(request: Request,
+def list_jobs(backend: Backend, owner: Owner,
               status: str | None = Query(None, description=f"only jobs with this status: {', '.join(STATUSES)}",
                                          json_schema_extra={"enum": list(STATUSES)}),
               limit: int = Query(DEFAULT_LIMIT, ge=1, le=MAX_LIMIT, description="most items on the page"),
@@ -199,7 +200,7 @@ def list_jobs(request: Request,
         raise invalid_request([FieldError(field="status", reason=f"{status!r} is not a job status; one of "
                                                                  f"{', '.join(STATUSES)}")])
     try:
-        records, next_cursor = _backend(request).list_jobs(status, limit, cursor, request.state.owner)
+        records, next_cursor = backend.list_jobs(status, limit, cursor, owner)
     except InvalidCursor as exc:
         raise invalid_request([FieldError(field="cursor", reason=str(exc))]) from None
     return JobList(items=[JobListItem(id=r.id, status=r.status, progress=r.progress, created_at=r.created_at,  # type: ignore[arg-type]

@@ -8,7 +8,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from nonholonomic.isomorphisms import MAPS, SOURCE_KINDS, MapInputError, describe, get_map, map_states
+from nonholonomic.isomorphisms import MAPS, SOURCE_KINDS, describe, get_map, map_states
 from schemas.maps import MapList, MapRequest, MapResult
 from schemas.problems import NOT_FOUND, FieldError
 from service.errors import ProblemError, invalid_request, problem_responses
@@ -40,11 +40,8 @@ def apply_map(name: str, request: MapRequest) -> dict[str, Any]:
         m = get_map(name, potential)
     except KeyError as exc:
         raise invalid_request([FieldError(field="system.potential.kind", reason=str(exc.args[0]))]) from None
-    try:
-        out = map_states(m, request.system.parameter_values(), request.states,
-                         inverse=request.inverse, project=request.project)
-    except MapInputError as exc:
-        raise invalid_request([FieldError(field=f, reason=r) for f, r in exc.problems]) from None
+    out = map_states(m, request.system.parameter_values(), request.states,  # refused states: a 422 (service.errors)
+                     inverse=request.inverse, project=request.project)
     infinite = list(_non_finite(out))
     if infinite:  # e.g. Theorem 3 with D = 0: alpha = -beta = det J / D
         raise invalid_request([FieldError(field="system", reason=(

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from collections.abc import Callable, Iterator
-from typing import Any, Literal
+from collections.abc import Callable
+from typing import Literal
 
 from fastapi import APIRouter, Request, Response
 from fastapi.responses import HTMLResponse
@@ -14,7 +14,8 @@ from fastapi.responses import HTMLResponse
 from schemas.problems import CONFLICT
 from schemas.report import REPORT_JOB
 from service.access import ensemble_of, job_of
-from service.backends import JobBackend, JobRecord
+from service.backends import JobRecord
+from service.deps import Backend, Owner
 from service.ensembles import all_members, members_page, request_units, view
 from service.errors import ProblemError, media_responses, problem_responses
 from service.exports import download, download_responses
@@ -57,18 +58,6 @@ class _PlotCache:
 _cache = _PlotCache(PLOT_CACHE_SIZE)
 
 
-def _backend(request: Request) -> JobBackend:
-    return request.app.state.backend
-
-
-def _job(request: Request, job_id: str) -> JobRecord:
-    return job_of(request, job_id)
-
-
-def _ensemble(request: Request, ensemble_id: str) -> dict[str, Any]:
-    return ensemble_of(request, ensemble_id)
-
-
 #: Media types of the plots (:data:`service.plots.FORMATS`, without importing matplotlib at start-up).
 IMAGE_TYPES = {"png": "image/png", "svg": "image/svg+xml"}
 
@@ -83,9 +72,9 @@ def _image(data: bytes, fmt: str, filename: str, request: Request | None = None)
 @router.get("/v1/jobs/{job_id}/page", tags=["jobs"], operation_id="jobs-page", response_class=HTMLResponse,
             responses={**_HTML, **problem_responses({404: "unknown job id"})},
             summary="The job as a page: system, evidence tables with verdicts, plots, links to the exports")
-def job_page(job_id: str, request: Request) -> HTMLResponse:
+def job_page(job_id: str, backend: Backend, owner: Owner) -> HTMLResponse:
     """Reloads itself every 2 s while the job is queued or running."""
-    record = _job(request, job_id)
+    record = job_of(backend, owner, job_id)
     if record.request.get("job") == REPORT_JOB:
         return report_html(record)
     return HTMLResponse(render_job({"id": record.id, "status": record.status, "progress": record.progress,
@@ -106,9 +95,11 @@ def report_html(record: JobRecord) -> HTMLResponse:
             responses={**_IMAGE, **problem_responses({404: "unknown job id",
                                                       409: "the job has not succeeded, or asked for no such analysis",
                                                       422: "unknown plot name or format"})},
-            summary="A plot of a job's result (matplotlib): trajectory, integrals, poincare, lyapunov or periodic_orbit, PNG or SVG")
-def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Request) -> Response:
-    record = _job(request, job_id)
+            summary="A plot of a job's result (matplotlib): trajectory, integrals, poincare, lyapunov or "
+                    "periodic_orbit, PNG or SVG")
+def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Request, backend: Backend,
+                   owner: Owner) -> Response:
+    record = job_of(backend, owner, job_id)
     if record.status != "succeeded" or record.result is None:
         raise ProblemError(409, "No result yet", f"job {job_id} is {record.status}; its plots are there once it "
                                                  "succeeded", CONFLICT)
@@ -127,15 +118,11 @@ def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Req
 @router.get("/v1/ensembles/{ensemble_id}/page", tags=["ensembles"], operation_id="ensembles-page",
             response_class=HTMLResponse, responses={**_HTML, **problem_responses({404: "unknown ensemble id"})},
             summary="The ensemble as a page: progress, summary, plots, the first members, links to the exports")
-def ensemble_page(ensemble_id: str, request: Request) -> HTMLResponse:
+def ensemble_page(ensemble_id: str, backend: Backend, owner: Owner) -> HTMLResponse:
     """Reloads itself every 2 s while chunks are queued or running."""
-    record = _ensemble(request, ensemble_id)
-    members = members_page(_backend(request).ensembles, ensemble_id, record, 0, PAGE_MEMBERS)
+    record = ensemble_of(backend, owner, ensemble_id)
+    members = members_page(backend.ensembles, ensemble_id, record, 0, PAGE_MEMBERS)
     return HTMLResponse(render_ensemble(view(ensemble_id, record), members, request_units(record["request"])))
-
-
-def _all_members(request: Request, ensemble_id: str, record: dict[str, Any]) -> Iterator[dict[str, Any]]:
-    return all_members(_backend(request).ensembles, ensemble_id, record)
 
 
 @router.get("/v1/ensembles/{ensemble_id}/plots/{name}.{fmt}", tags=["ensembles"], operation_id="ensembles-plot",
@@ -144,9 +131,10 @@ def _all_members(request: Request, ensemble_id: str, record: dict[str, Any]) -> 
                                                       409: "no member done yet, or no such analysis asked for",
                                                       422: "unknown plot name or format"})},
             summary="A plot of an ensemble (matplotlib): every member's poincare points, the exponents, or a chaos map")
-def ensemble_plot_route(ensemble_id: str, name: EnsemblePlotName, fmt: PlotFormat, request: Request) -> Response:
+def ensemble_plot_route(ensemble_id: str, name: EnsemblePlotName, fmt: PlotFormat, request: Request,
+                        backend: Backend, owner: Owner) -> Response:
     """Drawn from the members of the chunks done so far; cached by that set of chunks."""
-    record = _ensemble(request, ensemble_id)
+    record = ensemble_of(backend, owner, ensemble_id)
     current = view(ensemble_id, record)
     if not record["done"]:
         raise ProblemError(409, "No members yet", f"ensemble {ensemble_id} is {current['status']} and no chunk has "
@@ -156,7 +144,8 @@ def ensemble_plot_route(ensemble_id: str, name: EnsemblePlotName, fmt: PlotForma
     done = ",".join(str(i) for i in sorted(record["done"]))  # finished chunks do not change: neither does the plot
     try:
         data = _cache.get(("ensemble", ensemble_id, name, fmt, done),
-                          lambda: ensemble_plot(name, current, _all_members(request, ensemble_id, record), fmt),
+                          lambda: ensemble_plot(name, current, all_members(backend.ensembles, ensemble_id, record),
+                                                fmt),
                           keep=True)
     except PlotUnavailable as exc:
         raise ProblemError(409, "Plot unavailable", str(exc), CONFLICT) from None

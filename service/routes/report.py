@@ -12,6 +12,7 @@ from schemas.problems import NOT_FOUND, FieldError
 from schemas.report import REPORT_JOB, ClaimList, PaperReportRequest
 from service.access import job_of
 from service.admission import admit_job
+from service.deps import AppSettings, Backend, Owner
 from service.errors import UNAVAILABLE_BACKEND, ProblemError, invalid_request, problem_responses
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
@@ -35,7 +36,8 @@ def list_claims() -> dict[str, Any]:
                                                "body" + IDEMPOTENCY_MISMATCH,
                                           429: QUEUE_BOUNDS, 503: UNAVAILABLE_BACKEND}),
              summary="Check every claim of the paper (a job; the HTML page is /v1/paper/report/{id})")
-def submit_report(request: Request, body: PaperReportRequest | None = Body(None)) -> JSONResponse:  # noqa: B008
+def submit_report(request: Request, backend: Backend, owner: Owner, settings: AppSettings,
+                  body: PaperReportRequest | None = Body(None)) -> JSONResponse:
     job = body or PaperReportRequest()
     problems = job.problems()
     if problems:
@@ -43,21 +45,21 @@ def submit_report(request: Request, body: PaperReportRequest | None = Body(None)
     spec = job.model_dump(mode="json")
 
     def create() -> tuple[dict[str, Any], dict[str, str]]:
-        record = admit_job(request, spec)
+        record = admit_job(backend, owner, settings, spec)
         location = f"/v1/jobs/{record.id}"
         return (JobAccepted(id=record.id, status="queued", location=location).model_dump(),
                 {"Location": location,
                  "Link": f'</v1/paper/report/{record.id}>; rel="alternate"; type="text/html"'})
 
-    return idempotent(request, spec, create)
+    return idempotent(request, owner, spec, create)
 
 
 @router.get("/report/{job_id}", operation_id="paper-report-page", response_class=HTMLResponse,
             responses=problem_responses({404: "no paper report job with this id", 503: UNAVAILABLE_BACKEND}),
             summary="The report as a page a person reads")
-def report_page(job_id: str, request: Request) -> HTMLResponse:
+def report_page(job_id: str, backend: Backend, owner: Owner) -> HTMLResponse:
     try:
-        record = job_of(request, job_id)
+        record = job_of(backend, owner, job_id)
     except ProblemError:
         record = None
     if record is None or record.request.get("job") != REPORT_JOB:

@@ -26,6 +26,7 @@ import sympy as sp
 from fastapi import APIRouter, Request, Response
 from starlette.concurrency import run_in_threadpool
 
+from nonholonomic.refusals import RefusedField
 from schemas.problems import OVERLOADED, FieldError
 from schemas.settings import Settings, get_settings
 from schemas.symbolic import (
@@ -50,14 +51,6 @@ _ERRORS = problem_responses({
     422: INVALID + " (parse errors name the field and position; too many expressions or characters)",
     503: "the symbolic pool and its wait queue are full, or the symbolic work outlived the machine's safety cap "
          f"({SAFETY_CAP_ENV}, default {DEFAULT_SAFETY_CAP_S:g} s: not a verdict); `Retry-After` says when to retry"})
-
-
-class FieldProblem(ValueError):
-    """A user's input refused in the child process (picklable): answered as a 422 naming ``field``."""
-
-    def __init__(self, field: str, reason: str) -> None:
-        super().__init__(field, reason)
-        self.field, self.reason = field, reason
 
 
 class SafetyCapped(RuntimeError):
@@ -87,7 +80,7 @@ def _declare(names: Sequence[str], field: str) -> dict[str, sp.Symbol]:
     try:
         return declare_symbols(list(names))
     except ExpressionError as exc:
-        raise FieldProblem(field, exc.reason) from None
+        raise RefusedField(field, exc.reason) from None
 
 
 def _parse(text: str, symbols: dict[str, sp.Symbol], field: str) -> sp.Expr:
@@ -98,7 +91,7 @@ def _parse(text: str, symbols: dict[str, sp.Symbol], field: str) -> sp.Expr:
     try:
         return differentiable(parse_expression(text, symbols), "the checks differentiate it", order=1)
     except ExpressionError as exc:
-        raise FieldProblem(field, str(exc)) from None
+        raise RefusedField(field, str(exc)) from None
 
 
 def _expressions(request: BracketVerifyRequest | HamiltonizeRequest) -> list[tuple[str, str]]:
@@ -168,8 +161,6 @@ async def _run(http: Request, fn: Any, request: BracketVerifyRequest | Hamiltoni
     async with pool.slot():
         try:
             answer = await run_in_threadpool(run_isolated, _in_child, (fn, payload, cap), cap + GRACE_S)
-        except FieldProblem as exc:
-            raise invalid_request([FieldError(field=exc.field, reason=exc.reason)]) from None
         except (IsolatedTimeout, SafetyCapped) as exc:
             retry = max(pool.retry_after_s(), math.ceil(cap))
             raise ProblemError(
@@ -214,10 +205,10 @@ def _verify_in_child(payload: dict[str, Any]) -> dict[str, Any]:
     try:
         report = verify_user_bracket([symbols[v] for v in request.variables], matrix, casimirs,
                                      {symbols[k]: v for k, v in request.parameters.items()}, limits=_limits(request))
-    except FieldProblem:
+    except RefusedField:
         raise
     except ValueError as exc:
-        raise FieldProblem("matrix", str(exc)) from None
+        raise RefusedField("matrix", str(exc)) from None
     return {"variables": request.variables, "convention": "matrix[i][j] = {x_i, x_j}", **report}
 
 
@@ -245,10 +236,10 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
     kwargs = {"domain": domain, "shift": shift, "multiplier_symbol": multiplier, "limits": _limits(request)}
     try:
         return reduce(*args, **kwargs).to_json()
-    except FieldProblem:
+    except RefusedField:
         raise
     except ValueError as exc:
-        raise FieldProblem("lagrangian", str(exc)) from None
+        raise RefusedField("lagrangian", str(exc)) from None
 
 
 @router.post("/v1/hamiltonize", operation_id="symbolic-hamiltonize", response_model=HamiltonizeResult,
@@ -274,21 +265,22 @@ def _monopole(request: HamiltonizeRequest, symbols: dict[str, sp.Symbol]) -> tup
         for j, text in enumerate(pair):
             value = _parse(text, {}, f"monopole.domain[{i}][{j}]")
             if not (value.is_number and value.is_real and value.is_finite):
-                raise FieldProblem(f"monopole.domain[{i}][{j}]", "must be a finite real constant (numbers and pi)")
+                raise RefusedField(f"monopole.domain[{i}][{j}]", "must be a finite real constant (numbers and pi)")
             bounds.append(float(value))
         if not bounds[0] < bounds[1]:
-            raise FieldProblem(f"monopole.domain[{i}]",
+            raise RefusedField(f"monopole.domain[{i}]",
                                f"the lower bound {bounds[0]:g} must be below the upper {bounds[1]:g}")
         domain.append((bounds[0], bounds[1]))
     if spec.shift is None:
         return tuple(domain), None, None
     if MULTIPLIER_NAME in symbols:
-        raise FieldProblem("monopole.shift", (
+        raise RefusedField("monopole.shift", (
             f"'{MULTIPLIER_NAME}' stands for the reducing multiplier in the shift; rename the declared name "
             f"'{MULTIPLIER_NAME}'"))
     N = sp.Symbol(MULTIPLIER_NAME, real=True)
     allowed = {name: symbols[name] for name in request.coordinates + list(request.parameters) + request.symbols}
-    shift = tuple(_parse(text, {**allowed, MULTIPLIER_NAME: N}, f"monopole.shift[{k}]") for k, text in enumerate(spec.shift))
+    shift = tuple(_parse(text, {**allowed, MULTIPLIER_NAME: N}, f"monopole.shift[{k}]")
+                  for k, text in enumerate(spec.shift))
     return tuple(domain), shift, N
 
 
@@ -311,7 +303,8 @@ def hamiltonize_examples() -> dict[str, Any]:
     )
 
     examples = {}
-    for name, build in (("veselova", veselova_generalized_chaplygin), ("chaplygin_ball", chaplygin_ball_generalized_chaplygin)):
+    for name, build in (("veselova", veselova_generalized_chaplygin),
+                        ("chaplygin_ball", chaplygin_ball_generalized_chaplygin)):
         spec = build()
         coordinates, velocities = spec["coordinates"].split(","), spec["velocities"].split(",")
         fields = {k: spec[k] for k in ("lagrangian", "a1", "a2", "b")}

@@ -51,7 +51,8 @@ def test_without_a_key_every_v1_route_is_401_and_health_and_docs_are_open(keyed)
     r = keyed.get("/v1/systems", headers={"Authorization": "Bearer not-a-key"})
     assert r.status_code == 401 and "not one of this service's" in r.json()["detail"]
     assert keyed.get("/health").status_code == 200 and keyed.get("/openapi.json").status_code == 200
-    assert keyed.get("/v1/systems", headers=A).status_code == 200 and keyed.get("/v1/systems", headers=B).status_code == 200
+    assert (keyed.get("/v1/systems", headers=A).status_code == 200
+            and keyed.get("/v1/systems", headers=B).status_code == 200)
     assert "secret" not in keyed.get("/health").text
 
 

@@ -88,7 +88,8 @@ def test_an_ensemble_whose_chunks_alone_exceed_the_bound_is_a_cheap_422(app_with
     r = client.post("/v1/ensembles", json=ensemble(6), headers=A)
     assert r.status_code == 422, r.text
     (error,) = r.json()["errors"]
-    assert error["field"] == "chunk_size" and "6 chunks" in error["reason"] and "max_queued_messages=5" in error["reason"]
+    assert (error["field"] == "chunk_size" and "6 chunks" in error["reason"]
+            and "max_queued_messages=5" in error["reason"])
     default = client.post("/v1/ensembles", json=ensemble(30_000, chunk_size=None, sample=True))  # default chunks
     assert default.status_code == 422 and default.json()["errors"][0]["field"] == "members", default.text
     # 20,000 members, one chunk each: refused before any member is validated or any chunk is queued

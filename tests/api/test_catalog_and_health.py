@@ -60,7 +60,8 @@ def test_catalog_describes_the_ball(client):
     ball = next(s for s in systems if s["kind"] == "chaplygin_ball")
     assert ball == client.get("/v1/systems/chaplygin_ball").json()
     params = {p["name"]: p for p in ball["parameters"]}
-    assert params["inertia"]["admissible"] == "> 0: 1e-12 .. 1e+12" and params["D"]["admissible"] == ">= 0, at most 1e+12"
+    assert (params["inertia"]["admissible"] == "> 0: 1e-12 .. 1e+12"
+            and params["D"]["admissible"] == ">= 0, at most 1e+12")
     assert params["inertia"]["unit"] == "kg m^2"
     assert [s["name"] for s in ball["state"]] == ["M", "gamma"]
     assert {p["kind"] for p in ball["potentials"]} == {"zero", "linear", "brun"}

@@ -21,5 +21,6 @@ def test_catalog_example_runs_and_every_check_passes(client, kind):
     assert result["integrals"] and all(i["passed"] for i in result["integrals"]), result["integrals"]
     assert result["checks"] and all(c["passed"] is not False for c in result["checks"]), result["checks"]
     assert any(c["method"] == "pointwise" and c["passed"] for c in result["checks"])
-    names = {i["name"] for i in entry["integrals"] if example["system"]["potential"]["kind"] in i["claimed_for_potentials"]}
+    names = {i["name"] for i in entry["integrals"]
+             if example["system"]["potential"]["kind"] in i["claimed_for_potentials"]}
     assert {i["name"] for i in result["integrals"]} == names

@@ -3,12 +3,12 @@
 its JSON holds no NaN or infinity.
 
 Bodies start from the catalog's example of each kind, then are spoiled 0 to 3 times: a value replaced
-by an extreme number or a wrong type, scaled by up to 1e300, a key deleted or an unknown one added. Expressions come from a
-small grammar with the whitelist's functions and forbidden ones, huge literals and broken syntax, and the hazards
-that once gave 500s or held the API (issue 19): ``sign``, irrational exponents (``x**pi``, ``x**E``,
-``x**sqrt(2)``, ``exp(pi*log(x))``), deep powers and nesting; on every expression field: a potential U, a surface
-Phi, a Poincaré surface, a claim, a generalized Chaplygin system's L, a1, a2, b and U, a bracket's entries and
-Casimirs, Theorem 1's fields.
+by an extreme number or a wrong type, scaled by up to 1e300, a key deleted or an unknown one added.
+Expressions come from a small grammar with the whitelist's functions and forbidden ones, huge literals
+and broken syntax, and the hazards that once gave 500s or held the API (issue 19): ``sign``, irrational
+exponents (``x**pi``, ``x**E``, ``x**sqrt(2)``, ``exp(pi*log(x))``), deep powers and nesting; on every
+expression field: a potential U, a surface Phi, a Poincaré surface, a claim, a generalized Chaplygin
+system's L, a1, a2, b and U, a bracket's entries and Casimirs, Theorem 1's fields.
 
 Short here (``NONHOLONOMIC_FUZZ_EXAMPLES``, default 60 per request kind); ``bench/fuzz_api.py`` runs
 it long.
@@ -28,8 +28,8 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 EXAMPLES = int(os.environ.get("NONHOLONOMIC_FUZZ_EXAMPLES", "60"))
 #: The note of an answer to a body with the deprecated budget_s.
 BUDGET_S_NOTE = ("budget_s is deprecated and ignored: verdicts are bounded by work limits (limits.max_proof_ops, "
-                 "limits.max_integrate_ops, limits.max_tidy_ops: sympy operation counts), not seconds, so the same body "
-                 "gets the same answer on every machine; it will be removed")
+                 "limits.max_integrate_ops, limits.max_tidy_ops: sympy operation counts), not seconds, "
+                 "so the same body gets the same answer on every machine; it will be removed")
 PROBLEM = "application/problem+json"
 #: Seconds an accepted job may run before the fuzzer cancels it (a slow job is not a failure).
 JOB_WAIT_S = 20.0
@@ -312,7 +312,8 @@ def bracket_bodies(draw: st.DrawFn) -> dict[str, Any]:
 #: Functions of the coordinates x, y only (what a1, a2, b and U must be), mostly.
 IN_COORDINATES = st.one_of(st.recursive(
     st.sampled_from(["x", "y", "1", "2", "0.5", "0"]),
-    lambda inner: st.one_of(st.tuples(inner, st.sampled_from(["+", "-", "*"]), inner).map(lambda t: f"({t[0]}){t[1]}({t[2]})"),
+    lambda inner: st.one_of(st.tuples(inner, st.sampled_from(["+", "-", "*"]), inner).map(
+                                lambda t: f"({t[0]}){t[1]}({t[2]})"),
                             st.tuples(st.sampled_from(["sin", "cos"]), inner).map(lambda t: f"{t[0]}({t[1]})")),
     max_leaves=4), st.sampled_from(["x", "y", "1", "2", "0.5", "0"]), st.sampled_from(["x", "y", "1", "2", "0.5", "0"]),
     EXPRESSIONS, _hazards(["x", "y"]))

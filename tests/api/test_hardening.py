@@ -67,8 +67,8 @@ def test_a_result_with_a_non_finite_number_fails_the_job_naming_it(monkeypatch):
     monkeypatch.setattr(jobs, "result_to_json", overflowing)
     with pytest.raises(jobs.NonFiniteResult, match=r"trajectory\.M\[3\]\[1\] is inf"):
         jobs.run_job(job())
-    assert results.first_non_finite({"a": [1.0, {"b": [0.0, float("nan")]}]}) == ("a[1].b[1]", pytest.approx(float("nan"),
-                                                                                                        nan_ok=True))
+    assert results.first_non_finite({"a": [1.0, {"b": [0.0, float("nan")]}]}) == (
+        "a[1].b[1]", pytest.approx(float("nan"), nan_ok=True))
     assert results.first_non_finite({"a": [1.0, 2.0], "b": None, "c": "x"}) is None
 
 

@@ -22,7 +22,8 @@ def submit(client, body) -> str:
 
 
 def test_job_succeeds_with_the_core_numbers_and_the_design_fields(client):
-    view = poll_job(client, submit(client, job(system={**BALL, "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}})))
+    view = poll_job(client, submit(client, job(
+        system={**BALL, "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}})))
     assert view["status"] == "succeeded" and view["progress"] == 1.0 and view["error"] is None
     result = view["result"]
     direct = simulate(get_system("chaplygin_ball", "linear"), {**{k: v for k, v in BALL.items() if k != "kind"},
@@ -92,7 +93,8 @@ INVALID = [
     ("zero moment", job(system={**BALL, "inertia": [0.0, 3.0, 4.5]}), "system.inertia[0]", "greater than 0"),
     ("negative moment", job(system={**BALL, "inertia": [2.0, -3.0, 4.5]}), "system.inertia[1]", "greater than 0"),
     ("D < 0", job(system={**BALL, "D": -0.1}), "system.D", "greater than or equal to 0"),
-    ("|gamma| != 1", job(initial_state={**STATE, "gamma": [0.0, 0.6, 0.8 + 1e-8]}), "initial_state.gamma", "|gamma| = 1"),
+    ("|gamma| != 1", job(initial_state={**STATE, "gamma": [0.0, 0.6, 0.8 + 1e-8]}), "initial_state.gamma",
+     "|gamma| = 1"),
     ("NaN", NAN_M, "initial_state.M[0]", "finite"),
     ("infinite t_final", INF_T, "t_final", "finite"),
     ("infinite D", INF_D, "system.D", "finite"),
@@ -102,15 +104,18 @@ INVALID = [
     ("too many samples", job(samples=5002), "samples", "maximum"),
     ("one sample", job(samples=1), "samples", "greater than or equal to 2"),
     ("unknown kind", job(system={**BALL, "kind": "chaplygin_sled"}), "system.kind", "does not match"),
-    ("unknown potential", job(system={**BALL, "potential": {"kind": "coulomb"}}), "system.potential.kind", "does not match"),
-    ("potential parameter missing", job(system={**BALL, "potential": {"kind": "linear"}}), "system.potential.a", "required"),
+    ("unknown potential", job(system={**BALL, "potential": {"kind": "coulomb"}}), "system.potential.kind",
+     "does not match"),
+    ("potential parameter missing", job(system={**BALL, "potential": {"kind": "linear"}}), "system.potential.a",
+     "required"),
     ("short vector", job(initial_state={**STATE, "M": [1.0, 2.0]}), "initial_state.M", "needs 3 components, got 2"),
     ("missing gamma", job(initial_state={"M": [0.5, -0.2, 0.1]}), "initial_state.gamma", "missing"),
     ("unknown state", job(initial_state={**STATE, "x": [0, 0, 1]}), "initial_state.x", "not a state variable"),
     ("M and omega", job(initial_state={**STATE, "omega": [0, 0, 1]}), "initial_state.omega", "only one"),
     ("unknown field", {**job(), "tfinal": 3}, "tfinal", "Extra inputs"),
     ("unknown check", job(checks=["lyapunov"]), "checks[0]", "Input should be"),
-    ("scipy too tight", job(integrator={"engine": "scipy", "tolerance": 1e-15}), "integrator.tolerance", "cannot honour"),
+    ("scipy too tight", job(integrator={"engine": "scipy", "tolerance": 1e-15}), "integrator.tolerance",
+     "cannot honour"),
     ("unknown engine", job(integrator={"engine": "rk4"}), "integrator.engine", "Input should be"),
     ("not JSON", "{not json", "body", "not valid JSON"),
 ]
@@ -127,7 +132,8 @@ def test_invalid_requests_get_422_naming_the_field_and_nothing_is_queued(client,
     assert r.status_code == 422, r.text
     assert r.headers["content-type"] == "application/problem+json"
     problem = r.json()
-    assert problem["status"] == 422 and problem["type"] == "/problems/invalid-request" and problem["instance"] == "/v1/jobs"
+    assert (problem["status"] == 422 and problem["type"] == "/problems/invalid-request"
+            and problem["instance"] == "/v1/jobs")
     matching = [e for e in problem["errors"] if e["field"] == field]
     assert matching, problem["errors"]
     assert reason in matching[0]["reason"] and field in problem["detail"]

@@ -36,7 +36,8 @@ def _verdicts(result: dict, classic: dict) -> dict:
     assert structure["measure"]["verdict"] == classic["measure"], structure["measure"]["reason"]
     assert structure["hamiltonization"]["verdict"] == classic["hamiltonization"], structure["hamiltonization"]
     assert all(i["passed"] for i in result["integrals"]), [(i["name"], i["max_rel_drift"]) for i in result["integrals"]]
-    assert all(c["passed"] is not False for c in result["checks"]), [c for c in result["checks"] if c["passed"] is False]
+    assert all(c["passed"] is not False for c in result["checks"]), [
+        c for c in result["checks"] if c["passed"] is False]
     return structure
 
 

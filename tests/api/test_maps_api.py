@@ -57,8 +57,8 @@ def test_a_state_off_the_level_set_is_422_with_the_condition_and_its_value(clien
     assert r.status_code == 422
     (error,) = r.json()["errors"]
     assert error["field"] == "states[1].M" and "(M, gamma) = 0" in error["reason"] and "-0.04" in error["reason"]
-    r = client.post("/v1/maps/chaplygin_ball_to_clebsch", json={"system": BALL, "project": True,
-                                                                "states": [{"M": [0.5, -0.2, 0.1], "gamma": [0, 0.6, 0.8]}]})
+    r = client.post("/v1/maps/chaplygin_ball_to_clebsch", json={
+        "system": BALL, "project": True, "states": [{"M": [0.5, -0.2, 0.1], "gamma": [0, 0.6, 0.8]}]})
     assert r.status_code == 200 and r.json()["states"][0]["projections"][0]["field"] == "states[0]"
 
 
@@ -67,7 +67,8 @@ def test_a_state_off_the_level_set_is_422_with_the_condition_and_its_value(clien
      "system.potential.kind"),
     ("e3_to_clebsch", {"system": VESELOVA}, "system.kind"),
     ("veselova_to_e3", {"system": VESELOVA, "states": [{"omega": [1, 0, 0]}]}, "states[0].gamma"),
-    ("veselova_to_e3", {"system": VESELOVA, "states": [{"omega": [1, 0, 0], "gamma": [0, 1, 1e300]}]}, "states[0].gamma[2]"),
+    ("veselova_to_e3", {"system": VESELOVA, "states": [{"omega": [1, 0, 0], "gamma": [0, 1, 1e300]}]},
+     "states[0].gamma[2]"),
     ("veselova_to_e3", {"system": VESELOVA, "states": []}, "states"),
     ("chaplygin_ball_to_clebsch", {"system": BALL, "inverse": True}, "inverse"),
 ])
@@ -81,7 +82,8 @@ def test_bad_map_requests_are_422_naming_the_field(client, name, body, field):
 
 
 def test_unknown_map_is_404(client):
-    r = client.post("/v1/maps/kovalevskaya", json={"system": VESELOVA, "states": [{"omega": [0, 0, 0], "gamma": [0, 0, 1]}]})
+    r = client.post("/v1/maps/kovalevskaya",
+                    json={"system": VESELOVA, "states": [{"omega": [0, 0, 0], "gamma": [0, 0, 1]}]})
     assert r.status_code == 404 and r.headers["content-type"] == "application/problem+json"
 
 

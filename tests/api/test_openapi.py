@@ -405,7 +405,8 @@ def test_generated_client_downloads_every_file_as_its_exact_bytes(generated, cli
         calls.append((f"ensemble section {fmt}", answer, f"/v1/ensembles/{ensemble_id}/poincare", {"format": fmt}))
     for tag, ident, names in (("jobs", job_id, ("trajectory", "integrals", "poincare", "lyapunov")),
                               ("ensembles", ensemble_id, ("poincare", "exponents"))):
-        Name, Fmt = model(f"{tag}_plot_name", f"{tag.title()}PlotName"), model(f"{tag}_plot_fmt", f"{tag.title()}PlotFmt")
+        Name, Fmt = (model(f"{tag}_plot_name", f"{tag.title()}PlotName"),
+                     model(f"{tag}_plot_fmt", f"{tag.title()}PlotFmt"))
         for name in names:
             for fmt in ("png", "svg"):
                 answer = api_module(tag, f"{tag}_plot").sync_detailed(ident, Name(name), Fmt(fmt), client=api)

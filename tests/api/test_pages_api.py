@@ -44,7 +44,8 @@ def test_a_finished_job_page_has_its_tables_plots_and_exports(client):
         assert f"<code>{integral['formula'].replace('>', '&gt;')}</code>" in page
     assert page.count('class="v passed"') == len(view["result"]["integrals"]) + len(view["result"]["checks"])
     # the plots the result can draw, and no others (no poincare or lyapunov block was asked for)
-    assert f"/v1/jobs/{view['id']}/plots/trajectory.png" in page and f"/v1/jobs/{view['id']}/plots/integrals.png" in page
+    assert (f"/v1/jobs/{view['id']}/plots/trajectory.png" in page
+            and f"/v1/jobs/{view['id']}/plots/integrals.png" in page)
     assert "plots/poincare" not in page and "plots/lyapunov" not in page
     assert f"/v1/jobs/{view['id']}/trajectory?format=csv" in page
     assert "heyoka" in page and "sympy" in page  # the versions that computed it

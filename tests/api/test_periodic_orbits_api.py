@@ -38,7 +38,8 @@ def test_the_island_centre_with_its_continuation_through_a_period_doubling(clien
     x0 = np.array(orbit["initial_state"]["gamma"])
     assert abs(np.linalg.norm(x0) - 1) < 1e-12 and abs(x0[2]) < 1e-14
     branch = orbit["continuation"]
-    assert [p["status"] for p in branch["points"]] == ["found"] * 4 and all(p["checks_passed"] for p in branch["points"])
+    assert ([p["status"] for p in branch["points"]] == ["found"] * 4
+            and all(p["checks_passed"] for p in branch["points"]))
     assert [(e["kind"], e["between"]) for e in branch["events"]] == [("period_doubling", [0.8, 0.9])]
     page = client.get(f"/v1/jobs/{view['id']}/page")
     assert page.status_code == 200

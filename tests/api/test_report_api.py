@@ -14,7 +14,8 @@ def test_report_job_json_and_html(client):
     view = poll_job(client, r.headers["location"], timeout=180)
     assert view["status"] == "succeeded", view["error"]
     report = view["result"]
-    assert [row["id"] for row in report["rows"]] == sorted(CLAIMS, key=client.get("/v1/paper/claims").json()["claims"].index)
+    assert [row["id"] for row in report["rows"]] == sorted(
+        CLAIMS, key=client.get("/v1/paper/claims").json()["claims"].index)
     verdicts = {row["id"]: row["verdict"] for row in report["rows"]}
     assert verdicts == {"ball.theorem_3": "holds after correction", "veselova.clebsch_hamiltonian":
                         "holds after correction", "jacobi.chaos": "holds"}

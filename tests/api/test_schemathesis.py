@@ -9,9 +9,10 @@ Bounded so that it runs in about a minute on two cores: small service limits (``
 accepted (202) but not run (the embedded backend's runners are stubbed: integrating fuzzed systems
 tests the integrators, not the API, and their kernel compilation cannot be interrupted); the symbolic
 requests' work limits are capped at a tenth of the defaults (deterministic: the same case, the same
-answer); the symbolic routes and the paper report get fewer examples. Cases that name a job or an ensemble run twice: with the
-generated id (404) and with the id of a real finished one (a ball job with a section and
-exponents, an ensemble, a one-claim paper report), so the success answers are checked too.
+answer); the symbolic routes and the paper report get fewer examples. Cases that name a job or an
+ensemble run twice: with the generated id (404) and with the id of a real finished one (a ball job
+with a section and exponents, an ensemble, a one-claim paper report), so the success answers are
+checked too.
 """
 
 from __future__ import annotations

@@ -133,7 +133,8 @@ def test_the_templates_have_no_inline_script_or_style():
 
 
 @pytest.mark.parametrize("name,expected", [
-    ("job-1b4e28ba-2fa1-41d2-883f-0016d3cca427-trajectory.csv", "job-1b4e28ba-2fa1-41d2-883f-0016d3cca427-trajectory.csv"),
+    ("job-1b4e28ba-2fa1-41d2-883f-0016d3cca427-trajectory.csv",
+     "job-1b4e28ba-2fa1-41d2-883f-0016d3cca427-trajectory.csv"),
     (f"job-{CRLF_ID}-trajectory.csv", "job-sent__X-Injected__1_____b__id-trajectory.csv"),
     ("../../etc/passwd", "_.._etc_passwd"),
     ("..", "download"),

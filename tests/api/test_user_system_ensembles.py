@@ -29,7 +29,8 @@ def _single(client, body) -> dict:
 
 
 def test_an_ensemble_of_a_lagrangian_system_equals_its_single_jobs(client):
-    states = [SLEIGH_JOB["initial_state"], {"q": [0.0, 0.0, 1.0], "q_dot": [0.5 * np.cos(1.0), 0.5 * np.sin(1.0), -0.3]}]
+    states = [SLEIGH_JOB["initial_state"],
+              {"q": [0.0, 0.0, 1.0], "q_dot": [0.5 * np.cos(1.0), 0.5 * np.sin(1.0), -0.3]}]
     view, members = _ensemble(client, {"system": SLEIGH_JOB["system"], "members": {"initial_states": states},
                                        "t_final": 20.0, "poincare": {"surface": "theta_dot", "coordinates": ["x", "y"],
                                                                      "direction": "both"}})

@@ -56,7 +56,8 @@ NAMED_HOST = "docs.example.test"
 CSP_LISTENER = """
 window.__cspViolations = [];
 document.addEventListener('securitypolicyviolation', e => {
-  const what = `CSP violation: ${e.violatedDirective} blocked ${e.blockedURI || 'inline'} (${e.sourceFile}:${e.lineNumber})`;
+  const what = `CSP violation: ${e.violatedDirective} blocked ${e.blockedURI || 'inline'} \
+(${e.sourceFile}:${e.lineNumber})`;
   window.__cspViolations.push(what);
   console.error(what);
 });

@@ -52,7 +52,8 @@ def test_no_page_requests_anything_from_elsewhere(site: Path) -> None:
     assert not {page: urls for page, urls in offenders.items() if urls}
     # MathJax is served by the site itself, and pages with formulas load that copy.
     assert (site / "assets/mathjax/MathJax.js").is_file()
-    assert '<script src="../assets/mathjax/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full">' in (site / "errata/index.html").read_text(encoding="utf-8")
+    assert ('<script src="../assets/mathjax/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full">'
+            in (site / "errata/index.html").read_text(encoding="utf-8"))
 
 
 def test_http_reference_lists_the_routes_from_the_openapi_document(site: Path) -> None:

@@ -79,7 +79,8 @@ def test_a_key_whose_api_died_mid_request_is_free_again_after_its_lease(tmp_path
             wait_until(lambda: lock.execute(text(
                 "SELECT count(*) FROM pg_locks l JOIN pg_class c ON c.oid = l.relation "
                 "WHERE c.relname = 'jobs' AND NOT l.granted "
-                "AND l.database = (SELECT oid FROM pg_database WHERE datname = current_database())")).scalar() >= 1, GUARD_S,
+                "AND l.database = "
+                "(SELECT oid FROM pg_database WHERE datname = current_database())")).scalar() >= 1, GUARD_S,
                 "the POST to wait for the table (a hang guard)")
             time.sleep(1.5 * LEASE_S)  # served longer than its lease: renewed, still in progress
             busy = other.post("/v1/jobs", json=BODY, headers=headers)

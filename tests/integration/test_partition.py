@@ -81,10 +81,12 @@ def test_a_late_write_of_a_finished_chunk_changes_nothing():
         store.create("e", {"t_final": 1.0}, [(0, 2), (2, 3)])
         first = [{"index": 0, "status": "succeeded", "x": 0.5}, {"index": 1, "status": "succeeded", "x": 1.5}]
         assert store.store_chunk("e", 0, first, [{"d": 1}] * 2, "healthy")
-        late = [{"index": 0, "status": "failed", "error": "cut off"}, {"index": 1, "status": "failed", "error": "cut off"}]
+        late = [{"index": 0, "status": "failed", "error": "cut off"},
+                {"index": 1, "status": "failed", "error": "cut off"}]
         assert not store.store_chunk("e", 0, late, late, "cut-off")
         record = store.record("e")
-        assert record["done"] == {0} and record["workers"] == {0: "healthy"} and record["digests"] == {0: [{"d": 1}] * 2}
+        assert (record["done"] == {0} and record["workers"] == {0: "healthy"}
+                and record["digests"] == {0: [{"d": 1}] * 2})
         assert store.chunk_members("e", 0) == first
     finally:
         jobs.close()
@@ -96,7 +98,8 @@ def test_a_late_end_leaves_the_task_to_the_worker_that_holds_it_now():
     if not redis_available():
         pytest.fail(f"no Redis at {TEST_REDIS_URL}: run the README's test command, which starts one")
     client = redis.Redis.from_url(TEST_REDIS_URL)
-    task_id, cut_off, healthy = f"partition-{uuid.uuid4().hex}", f"{HEARTBEAT}worker:gone:1", f"{HEARTBEAT}worker:here:2"
+    task_id, cut_off, healthy = (f"partition-{uuid.uuid4().hex}", f"{HEARTBEAT}worker:gone:1",
+                                 f"{HEARTBEAT}worker:here:2")
     try:
         record_received(client, cut_off, task_id, "nonholonomic.ensemble_chunk", ["e", 0], {}, "q", 60)
         assert sweep(client, lambda *task: None) == [task_id]  # its heartbeat is gone: claimed, sent again
@@ -155,12 +158,14 @@ class Drill:
         self.base = f"http://127.0.0.1:{port}"
         self.client = httpx.Client(base_url=self.base, timeout=10)
         self.healthy = subprocess.Popen(
-            _worker_cmd(self.queue, "healthy"), cwd=ROOT, env=_worker_env(TEST_REDIS_URL, self.database_url, self.queue),
+            _worker_cmd(self.queue, "healthy"), cwd=ROOT,
+            env=_worker_env(TEST_REDIS_URL, self.database_url, self.queue),
             stdout=(self.logs / "healthy.log").open("w"), stderr=subprocess.STDOUT)
         self.processes.append(self.healthy)
         redis_target = urlsplit(TEST_REDIS_URL)
         db_target = make_url(self.database_url)
-        self.host.forward([(redis_target.hostname, redis_target.port or 6379), (db_target.host, db_target.port or 5432)],
+        self.host.forward([(redis_target.hostname, redis_target.port or 6379),
+                           (db_target.host, db_target.port or 5432)],
                           self.logs / "forwarder.log")
         remote_db = db_target.set(host=self.host.gateway).render_as_string(hide_password=False)
         self.remote = self.host.popen(

@@ -79,7 +79,7 @@ def queue_stack(tmp_path_factory) -> Iterator[tuple[httpx.Client, redis.Redis, s
         no_worker = httpx.get(f"{base}/health", timeout=5)
         # A worker's heartbeat before its warm-up ends: it consumes the queue with no warm process.
         cold = f"{PREFIX}worker:compiling:1"
-        store.set(cold, '{"name": "compiling@elsewhere", "queues": ["%s"]}' % queue, ex=int(2 * GUARD_S))
+        store.set(cold, f'{{"name": "compiling@elsewhere", "queues": ["{queue}"]}}', ex=int(2 * GUARD_S))
         seen: list[httpx.Response] = []  # /health may answer with a check up to 0.25 s old: poll
         wait_until(lambda: "warm-up" in (seen.append(httpx.get(f"{base}/health", timeout=5)) or seen[-1].text),
                    GUARD_S, "/health to see the compiling worker (a hang guard)")
@@ -124,7 +124,7 @@ def test_health_reads_the_heartbeats_and_names_no_host(queue_stack):
     from workers.heartbeat import PREFIX
 
     client, store, queue = queue_stack
-    store.set(f"{PREFIX}worker:elsewhere:1", '{"name": "cold@elsewhere", "queues": ["%s"]}' % queue,
+    store.set(f"{PREFIX}worker:elsewhere:1", f'{{"name": "cold@elsewhere", "queues": ["{queue}"]}}',
               ex=int(2 * GUARD_S))
     seen: list[dict] = []  # /health may answer with a check begun before the heartbeat was written: poll
     wait_until(lambda: "cold@elsewhere" in (seen.append(client.get("/health").json()) or seen[-1])["workers"],

@@ -130,7 +130,8 @@ def test_ordinary_requests_pass_with_the_security_headers(proxy):
         assert r.json()["status"] == "ok"
         assert r.headers["x-content-type-options"] == "nosniff" and r.headers["x-frame-options"] == "DENY"
         # refused by the proxy before the API reads it, with the same problem+json and headers
-        too_large = client.post("/v1/jobs", content=b"x" * ((1 << 20) + 1), headers={"content-type": "application/json"})
+        too_large = client.post("/v1/jobs", content=b"x" * ((1 << 20) + 1),
+                                headers={"content-type": "application/json"})
         assert too_large.status_code == 413 and too_large.headers["content-type"] == "application/problem+json"
         assert too_large.json()["type"] == "/problems/too-large" and too_large.json()["instance"] == "/v1/jobs"
         assert too_large.headers["content-security-policy"] == "default-src 'none'; frame-ancestors 'none'"

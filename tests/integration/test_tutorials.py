@@ -114,7 +114,8 @@ print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r
     run = _run([python, str(ROOT / "scripts" / "tutorials.py"), "--url", base, "--out", str(executed)], tmp_path,
                timeout=1200)
     assert run.returncode == 0, run.stderr[-4000:]
-    assert [line.split()[1] for line in run.stdout.splitlines() if line.startswith("ok ")] == [p.name for p in TUTORIALS]
+    assert ([line.split()[1] for line in run.stdout.splitlines() if line.startswith("ok ")]
+            == [p.name for p in TUTORIALS])
     for path in TUTORIALS:
         book = _read(executed / path.name)
         outputs = [o for c in book.cells if c.cell_type == "code" for o in c.outputs]

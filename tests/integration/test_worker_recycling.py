@@ -70,7 +70,8 @@ def test_a_pool_process_past_the_memory_bound_is_replaced_and_the_next_jobs_succ
                 finals.append(view["result"]["final_state"])
                 # the process that ran it exits; its replacement is warm (after its warm-up) before it
                 # says so, and /health is 200 again
-                wait_until(lambda: bool(_warm_processes(beats, worker.pid) - seen), 300, "a new warm pool process")
+                wait_until(lambda seen=seen: bool(_warm_processes(beats, worker.pid) - seen), 300,
+                           "a new warm pool process")
                 current = _warm_processes(beats, worker.pid)
                 assert not current & seen, (current, seen)  # the old one said goodbye
                 seen |= current

@@ -223,7 +223,8 @@ def test_cli_exit_codes_for_a_failed_job_and_a_server_error(tmp_path, capsys, mo
     _cli_against(monkeypatch, lambda request: httpx.Response(
         422, json={"type": "/problems/invalid-request", "title": "Invalid request", "status": 422,
                    "detail": "system.kind: unknown; t_final: must be > 0",
-                   "errors": [{"field": "system.kind", "reason": "unknown"}, {"field": "t_final", "reason": "must be > 0"}]}))
+                   "errors": [{"field": "system.kind", "reason": "unknown"},
+                              {"field": "t_final", "reason": "must be > 0"}]}))
     assert main(["--url", "http://api", "run", str(tmp_path / "spec.json")]) == 2
     # each error once (the detail, which only joins them, is not printed beside them)
     assert capsys.readouterr().err == "error: Invalid request\n  system.kind: unknown\n  t_final: must be > 0\n"
@@ -258,8 +259,10 @@ def test_wait_honours_retry_after_of_a_429_and_503(monkeypatch):
     from nonholonomic_client import ApiError, Client
 
     answers = [
-        httpx.Response(429, json={"title": "Rate limit", "status": 429, "detail": "slow down"}, headers={"Retry-After": "2"}),
-        httpx.Response(503, json={"title": "Unavailable", "status": 503, "detail": "restart"}, headers={"Retry-After": "1"}),
+        httpx.Response(429, json={"title": "Rate limit", "status": 429, "detail": "slow down"},
+                       headers={"Retry-After": "2"}),
+        httpx.Response(503, json={"title": "Unavailable", "status": 503, "detail": "restart"},
+                       headers={"Retry-After": "1"}),
         httpx.Response(200, json={"id": "j", "status": "succeeded", "progress": 1.0, "result": {}}),
     ]
     slept: list[float] = []

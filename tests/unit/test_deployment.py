@@ -134,6 +134,7 @@ def test_postgresql_holds_the_jobs_and_both_processes_use_it():
     assert postgres["image"].startswith("postgres:") and any(v.endswith("/var/lib/postgresql/data")
                                                              for v in postgres["volumes"])
     url = compose["services"]["worker"]["environment"]["DATABASE_URL"]
-    assert url.startswith("postgresql+psycopg://nonholonomic:${POSTGRES_PASSWORD:?") and url.endswith("@postgres:5432/nonholonomic")
+    assert (url.startswith("postgresql+psycopg://nonholonomic:${POSTGRES_PASSWORD:?")
+            and url.endswith("@postgres:5432/nonholonomic"))
     for name in ("api", "worker"):
         assert compose["services"][name]["depends_on"]["postgres"]["condition"] == "service_healthy"

@@ -64,7 +64,8 @@ def vanishes(expr: sp.Expr) -> bool:
     """``expr ≡ 0`` as a rational function: its numerator over a common denominator, expanded in a
     sparse polynomial ring over QQ (fast where sympy's cancel on many symbols is slow)."""
     numerator = sp.numer(sp.together(expr))
-    return not sp.polys.rings.PolyRing(sorted(numerator.free_symbols, key=sp.default_sort_key), sp.QQ).from_expr(numerator)
+    return not sp.polys.rings.PolyRing(sorted(numerator.free_symbols, key=sp.default_sort_key),
+                                       sp.QQ).from_expr(numerator)
 
 
 def with_time_density(form: HamiltonianForm, density: sp.Expr, scale_H: sp.Expr = sp.Integer(1)) -> HamiltonianForm:
@@ -287,7 +288,8 @@ def test_veselova_H_F_bracket_vanishes_exactly_on_M_Gamma_equal_zero():
     values = {ves.I1: 2, ves.I2: 3, ves.I3: sp.Rational(9, 2)}
     Gv = sp.Matrix([0, sp.Rational(3, 5), sp.Rational(4, 5)])
     gamma_dir = sp.diag(*[sp.sqrt(v) for v in values.values()]) * Gv  # gamma(Gamma) up to a positive factor
-    Mv = gamma_dir.cross(sp.Matrix([1, 0, 0])) + sp.Matrix([1, 0, 0])  # (M, gamma) = 0 (first component of gamma_dir is 0)
+    # (M, gamma) = 0 (first component of gamma_dir is 0)
+    Mv = gamma_dir.cross(sp.Matrix([1, 0, 0])) + sp.Matrix([1, 0, 0])
     point = {**values, **dict(zip(M, Mv)), **dict(zip(G, Gv))}
     assert dot(Mv, gamma_dir) == 0 and dot(Mv, Gv) != 0
     assert abs(float(HF.xreplace(point))) >= 0.1

@@ -165,7 +165,7 @@ def test_map_states_reports_projections_and_refuses_off_level_states():
     state = {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 1.2, 1.6]}
     with pytest.raises(iso.MapInputError) as err:
         iso.map_states(m, {"inertia": INERTIA, "D": 0.7}, [state])
-    assert {f for f, _ in err.value.problems} == {"states[0].gamma"}  # the first failure: |gamma| = 2
+    assert {f for f, _ in err.value.problems()} == {"states[0].gamma"}  # the first failure: |gamma| = 2
     out = iso.map_states(m, {"inertia": INERTIA, "D": 0.7}, [state], project=True)
     (entry,) = out["states"]  # type: ignore[misc]
     assert [p["field"] for p in entry["projections"]] == ["states[0].gamma", "states[0]"]

@@ -103,7 +103,8 @@ def test_a_job_stuck_outside_python_fails_at_the_hard_limit_and_its_thread_is_re
     assert _wait_end(backend, stuck.id) == "failed"
     assert backend.get(stuck.id).error == {
         "type": "JobTimeout",
-        "message": f"the job was stopped at its hard time limit of {HARD:g} s (its thread did not return and was replaced)"}
+        "message": f"the job was stopped at its hard time limit of {HARD:g} s "
+                   "(its thread did not return and was replaced)"}
     assert _wait_end(backend, small.id) == "succeeded"
     assert threads[1] is not threads[0]  # a new thread took the stuck one's place
     release.set()  # the stuck call returns at last: its thread ends, the job's record stays as it was

@@ -299,7 +299,8 @@ def test_the_projected_elimination_without_cancellation_equals_the_exact_one_on_
     for _ in range(4):
         point = dict(zip(args, rng.uniform(0.2, 0.8, len(args))))
         point.update(values)
-        A = np.array([[float(data.A[a, j].xreplace(point)) for j in range(len(data.q))] for a in range(data.A.shape[0])])
+        A = np.array([[float(data.A[a, j].xreplace(point)) for j in range(len(data.q))]
+                      for a in range(data.A.shape[0])])
         # d/dt (A q̇) = Ȧ q̇ + A q̈ = 0 at any q̇ (off the manifold too)
         adot = [float(sum(sp.diff(f, qj) * vj for qj, vj in zip(data.q, data.v)).xreplace(point))
                 for f in data.constraints]

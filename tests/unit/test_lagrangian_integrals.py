@@ -35,7 +35,8 @@ SUSLOV_TILTED = dict(SUSLOV, constraints=[("ca*(phi_dot*cos(theta) + psi_dot) + 
                      parameters={"I1": 1.0, "I2": 2.0, "I3": 3.0, "ca": 0.8, "sa": 0.6})
 #: The rolling disk: contact point (x, y), Euler angles (phi, theta, psi), theta the tilt.
 DISK = {"kind": "lagrangian", "coordinates": ["x", "y", "phi", "theta", "psi"],
-        "L": "m/2*(x_dot**2 + y_dot**2 + R**2*cos(theta)**2*theta_dot**2) + A/2*(theta_dot**2 + phi_dot**2*sin(theta)**2)"
+        "L": "m/2*(x_dot**2 + y_dot**2 + R**2*cos(theta)**2*theta_dot**2)"
+             " + A/2*(theta_dot**2 + phi_dot**2*sin(theta)**2)"
              " + C/2*(psi_dot + phi_dot*cos(theta))**2 - m*g*R*sin(theta)",
         "constraints": ["x_dot + R*(phi_dot*cos(phi)*cos(theta) + psi_dot*cos(phi) - theta_dot*sin(phi)*sin(theta))",
                         "y_dot + R*(phi_dot*sin(phi)*cos(theta) + psi_dot*sin(phi) + theta_dot*sin(theta)*cos(phi))"],
@@ -176,7 +177,8 @@ def test_an_integrable_constraint_gives_a_function_of_the_coordinates():
 CASES = [(SLEIGH, [0.2, -0.1, 0.3], [0.9, 0.7], None), (PARTICLE, [0.3, 0.5, -0.2], [0.8, -0.4], None),
          (FREE_PARTICLE, [0.3, 0.5, -0.2], [0.8, -0.4], "(1 + y**2)*x_dot"),
          (MAGNETIC, [0.3, -0.4], [0.5, 0.2], "x_dot"),
-         (SUSLOV, [0.3, 0.9, 0.4], [0.7, -0.5], "phi_dot"), (DISK, [0.0, 0.0, 0.2, 1.1, 0.1], [0.8, 0.3, 2.0], "phi_dot")]
+         (SUSLOV, [0.3, 0.9, 0.4], [0.7, -0.5], "phi_dot"),
+         (DISK, [0.0, 0.0, 0.2, 1.1, 0.1], [0.8, 0.3, 2.0], "phi_dot")]
 
 
 @pytest.mark.parametrize("spec, q0, u0, drifting", CASES,

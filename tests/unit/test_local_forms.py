@@ -132,7 +132,8 @@ def test_veselova_chaplygin_form_2504_7_reproduces_the_vector_flow(potential_kin
         assert at(sp.sin(th) * lf.thetadot * lf.phidot - sp.cos(th) * lf.phiddot, point, acc) == acc[lf.psiddot]
         residuals = [at(r, point, acc) for r in lf.generalized_chaplygin_residuals(L, lf.veselova_gyroscopic_term())]
         assert residuals == [0, 0], residuals
-        wrong = [at(r, point, acc) for r in lf.generalized_chaplygin_residuals(L, lf.veselova_gyroscopic_term_printed())]
+        wrong = [at(r, point, acc)
+                 for r in lf.generalized_chaplygin_residuals(L, lf.veselova_gyroscopic_term_printed())]
         printed.append(max(abs(float(r)) for r in wrong))
     assert min(printed) > 1e-2, printed  # ERRATA 2's printed S: residuals of order 0.1
 
@@ -161,7 +162,8 @@ def test_theorem_2_euler_lagrange_equations_hold_in_the_new_time():
     U = lf.on_euler_gamma(potential(system))
     values = {**parameter_values(system), **VELOCITIES}
     worst = {}
-    for name, n in (("errata", lf.veselova_reducing_multiplier()), ("printed", lf.veselova_reducing_multiplier_printed())):
+    for name, n in (("errata", lf.veselova_reducing_multiplier()),
+                    ("printed", lf.veselova_reducing_multiplier_printed())):
         Lbar = lf.time_substituted_lagrangian(lf.veselova_kinetic_energy(), n) - U
         back = {lf.thetap: lf.thetadot / n, lf.phip: lf.phidot / n}  # q′ = q̇ / N
         worst[name] = 0.0
@@ -310,7 +312,8 @@ def test_theorem_1_examples_are_safe_strings_of_the_tested_forms(kind):
     spec = lf.veselova_generalized_chaplygin() if kind == "veselova" else lf.chaplygin_ball_generalized_chaplygin()
     assert set(spec) == {"lagrangian", "a1", "a2", "b", "coordinates", "velocities"}
     assert spec["coordinates"] == "theta,phi" and spec["velocities"] == "thetadot,phidot"
-    names = {"theta", "phi", "thetadot", "phidot", "I1", "I2", "I3"} | ({"D", "c"} if kind == "chaplygin_ball" else set())
+    names = ({"theta", "phi", "thetadot", "phidot", "I1", "I2", "I3"}
+             | ({"D", "c"} if kind == "chaplygin_ball" else set()))
     L, a1, a2, b = (parse(spec[k], names) for k in ("lagrangian", "a1", "a2", "b"))
     S = a1 * lf.thetadot + a2 * lf.phidot + b
     g = lf.euler_gamma()
@@ -379,7 +382,8 @@ def test_states_at_the_poles_are_skipped_and_counted():
     p = np.array([2.0, 3.0, 4.5])
     near = np.array([np.sin(0.03) * np.sin(1.0), np.sin(0.03) * np.cos(1.0), np.cos(0.03)])
     w = np.array([0.3, -0.4, 0.2])
-    rows = [np.concatenate([w - w @ g * g, g]) for g in (np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0]), near, G0)]
+    rows = [np.concatenate([w - w @ g * g, g])
+            for g in (np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, -1.0]), near, G0)]
     items = lf.local_form_evidence(system, p, np.array(rows))
     for item in items:
         assert item.passed is True and item.residual <= 1e-10

@@ -184,7 +184,7 @@ def test_continuation_in_the_field_flags_the_period_doubling_where_the_trace_pas
     assert traces[2] > -2 > traces[3]
     assert [(e.kind, e.between) for e in branch.events] == [("period_doubling", (0.8, 0.9))]
     assert [o.stability for o in branch.orbits] == ["elliptic"] * 3 + ["hyperbolic"] * 2
-    for orbit, v in zip(branch.orbits, values):
+    for orbit, _v in zip(branch.orbits, values):
         assert_checks_pass(orbit)
         plus, minus = characteristic_signs(orbit.section_multipliers)
         assert plus == pytest.approx(2 - orbit.trace, abs=1e-8) and minus == pytest.approx(2 + orbit.trace, abs=1e-8)

@@ -157,7 +157,8 @@ def test_a_proof_past_max_proof_ops_is_undecided_naming_the_limit_and_the_pointw
     small = WorkLimits(max_proof_ops=size - 1)
     proven, detail = symbolic_divergence_vanishes(system, limits=small)
     assert proven is None
-    assert detail == f"div(rho f)/rho: the symbolic proof not tried: {size:,} operations > max {size - 1:,} (max_proof_ops)"
+    assert detail == (f"div(rho f)/rho: the symbolic proof not tried: {size:,} operations > max {size - 1:,} "
+                      "(max_proof_ops)")
     p = parameter_vector(system, {"inertia": INERTIA, "D": D})
     symbolic, pointwise = measure_evidence(system, p, run("zero", 5.0, samples=40, checks=[]).trajectory.states,
                                            limits=small)

@@ -94,7 +94,8 @@ def test_short_runs_finished_together_keep_their_order_next_to_a_failure():
     for i in (0, 1, 2, 3, 4, 6, 7, 8, 9, 10, 11):
         member, alone = out[i], integrate(BALL, P[i], bad[i], 30.0, 7)
         assert isinstance(member, Trajectory) and member.wall_time_s > 0
-        assert np.array_equal(member.states, clean[i].states) and np.array_equal(member.step_states, clean[i].step_states)
+        assert (np.array_equal(member.states, clean[i].states)
+                and np.array_equal(member.step_states, clean[i].step_states))
         assert np.array_equal(member.step_t, clean[i].step_t) and np.array_equal(member.tau, clean[i].tau)
         assert member.steps == alone.steps and member.step_states.shape == alone.step_states.shape
         assert np.max(np.abs(member.step_states - alone.step_states)) < 1e-13

@@ -90,7 +90,8 @@ def test_final_state_matches_independent_dop853(potential, t_final):
     # U = 0 is integrable (Euler–Jacobi), compared at t = 1000; with a field, t = 100 keeps the
     # comparison about the integrators rather than the amplification of round-off.
     pars = POTENTIALS[potential]
-    f = reference_rhs(a=np.asarray(pars.get("a", np.zeros(3))), k=pars.get("k", 0.0), Kmat=pars.get("K", np.zeros((3, 3))))
+    f = reference_rhs(a=np.asarray(pars.get("a", np.zeros(3))), k=pars.get("k", 0.0),
+                      Kmat=pars.get("K", np.zeros((3, 3))))
     ref = solve_ivp(f, (0, t_final), np.concatenate([W0, G0]), method="DOP853", rtol=1e-13, atol=1e-13).y[:, -1]
     result = run(potential, t_final, samples=2)
     assert np.max(np.abs(result.trajectory.states[-1] - ref)) <= 1e-9
@@ -132,7 +133,8 @@ def test_off_constraint_states_are_refused_or_projected():
     g, w = result.state("gamma")[0], result.state("omega")[0]
     assert abs(np.linalg.norm(g) - 1) <= 1e-15 and abs(np.dot(w, g)) <= 1e-16
     assert result.projections[1].value_after == pytest.approx(0, abs=1e-16)
-    assert result.projections[0].change == pytest.approx(np.max(np.abs(np.array([0, 0.6, 0.9]) / np.linalg.norm([0, 0.6, 0.9]) - [0, 0.6, 0.9])))
+    assert result.projections[0].change == pytest.approx(
+        np.max(np.abs(np.array([0, 0.6, 0.9]) / np.linalg.norm([0, 0.6, 0.9]) - [0, 0.6, 0.9])))
     assert all(i.max_rel_drift <= 1e-13 for i in result.integrals)
 
 
