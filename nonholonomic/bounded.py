@@ -152,7 +152,8 @@ def start(key: Hashable, fn: Callable[..., Any], args: tuple[Any, ...] = ()) -> 
             _tasks.move_to_end(key)
             return task
     memo_key = memo.key_of("bounded", key) if memo.installed() else None
-    found, kept = memo.recall(memo_key) if memo_key is not None else (False, None)
+    recalled: tuple[bool, Any] = memo.recall(memo_key) if memo_key is not None else (False, None)
+    found, kept = recalled  # kept: the remembered (value, seconds)
     inline = False
     with _lock:
         task = _tasks.get(key)

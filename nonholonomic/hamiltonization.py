@@ -206,7 +206,7 @@ def hamiltonian_form(system: MechanicalSystem) -> HamiltonianForm | None:
         with any of its potentials; other kinds give None.
     """
     if system.hamiltonian_form is not None:
-        return system.hamiltonian_form  # type: ignore[no-any-return]
+        return system.hamiltonian_form
     if system.kind == "veselova":
         return _veselova_form(system)
     if system.kind == "chaplygin_ball":

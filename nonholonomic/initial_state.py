@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
@@ -80,10 +81,12 @@ def project_initial_state(system: MechanicalSystem, p: np.ndarray,
     for i, (constraint, project) in enumerate(zip(system.constraints, kernels.projections)):
         if project is None:
             continue
+        projection = constraint.projection
+        assert projection is not None  # the kernel is compiled from the constraint's projection
         before = float(kernels.constraints(y[None, :], p)[0, i])
-        where = vector_slice(system, constraint.projection.vector)  # type: ignore[union-attr]
+        where = vector_slice(system, projection.vector)
         start = y[where].copy()
-        for _ in range(constraint.projection.steps):  # type: ignore[union-attr]
+        for _ in range(projection.steps):
             y[where] = project(y[None, :], p)[0]
             after = float(kernels.constraints(y[None, :], p)[0, i])
             if abs(after - constraint.value) <= 1e-3 * constraint.tolerance or not np.isfinite(after):
@@ -91,7 +94,7 @@ def project_initial_state(system: MechanicalSystem, p: np.ndarray,
         change = float(np.max(np.abs(y[where] - start)))
         if change > 0:
             reports.append(ProjectionReport(f"initial_state.{constraint.field}", constraint.formula,
-                                            constraint.projection.formula, before, after, change))  # type: ignore[union-attr]
+                                            projection.formula, before, after, change))
     return y, reports
 
 
@@ -200,7 +203,8 @@ def parameter_warnings(system: MechanicalSystem, parameters: Mapping[str, object
     warnings: list[str] = []
     inertia = parameters.get("inertia")
     if inertia is not None:
-        i1, i2, i3 = (float(v) for v in inertia)  # type: ignore[union-attr]
+        moments = cast("Sequence[float]", inertia)  # the group "inertia" is the three principal moments
+        i1, i2, i3 = (float(v) for v in moments)
         for a, b, c, names in ((i1, i2, i3, "I1 + I2 >= I3"), (i2, i3, i1, "I2 + I3 >= I1"),
                                (i3, i1, i2, "I3 + I1 >= I2")):
             if a + b < c:

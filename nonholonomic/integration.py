@@ -190,7 +190,7 @@ def _thread_copy(kind: str, system: MechanicalSystem, *key: object) -> hy.taylor
         while len(cache) > THREAD_COPIES:
             cache.popitem(last=False)
     cache.move_to_end(lookup)
-    return hit[1]  # type: ignore[return-value]
+    return hit[1]
 
 
 def _integrator(system: MechanicalSystem, tolerance: float) -> hy.taylor_adaptive:

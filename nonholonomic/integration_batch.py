@@ -106,7 +106,7 @@ def integrate_batch(
     run = _BatchRun(ts, _batch_integrator(system, tol, lanes), _sample_grid(float(t_final), int(samples)), tol,
                     None if check_points is None else _sample_grid(float(t_final), int(check_points)))
     pars = ts.runtime_parameters(P.T).T if len(P) else P  # every member's runtime parameters at once
-    results: list[Trajectory | IntegrationError] = [None] * len(P)  # type: ignore[list-item]
+    results: list[Trajectory | IntegrationError | None] = [None] * len(P)  # a slot per member, filled below
     for first in range(0, len(P), lanes):
         stop = min(first + lanes, len(P))
 
@@ -117,7 +117,9 @@ def integrate_batch(
         if progress is not None and stop < len(P) and not progress(stop / len(P)):
             raise IntegrationCancelled(f"cancelled after {stop} of {len(P)} members")
     run.finish(results)
-    return results
+    filled = [r for r in results if r is not None]
+    assert len(filled) == len(results)  # every member's slot is filled by members() or finish()
+    return filled
 
 
 #: One lane's result before its wall time is known: samples, τ (or None), step times, step states, steps.
@@ -170,7 +172,7 @@ class _BatchRun:
         self.short: list[tuple[int, int, float, float, int | list[int], np.ndarray]] = []
 
     def members(self, first: int, P: np.ndarray, pars: np.ndarray, Y0: np.ndarray, progress: ProgressCallback,
-                results: list[Trajectory | IntegrationError]) -> None:
+                results: list[Trajectory | IntegrationError | None]) -> None:
         """Members ``first ..`` (up to ``lanes``: parameters, runtime parameters, initial states) in one
         batch, into ``results`` (a short run at :meth:`finish`); padding lanes copy the last member. A
         member whose lane fails is integrated alone (for its reason, or its trajectory if it then
@@ -272,10 +274,12 @@ class _BatchRun:
             self.short.append((*short, time.perf_counter(), nsteps, out))
             return None, []
         samples, checks = out[self.where], out[self.check_rows]
-        return [(samples[:, :n, j], samples[:, n, j] if self.ts.has_tau else None, self.check_times, checks[:, :n, j],
+        check_times = self.check_times
+        assert check_times is not None  # a checked run: there are check points (check_rows is not None)
+        return [(samples[:, :n, j], samples[:, n, j] if self.ts.has_tau else None, check_times, checks[:, :n, j],
                  nsteps[j]) for j in range(self.lanes)], []
 
-    def finish(self, results: list[Trajectory | IntegrationError]) -> None:
+    def finish(self, results: list[Trajectory | IntegrationError | None]) -> None:
         """Every short run's trajectories into ``results``: step records are views of the log, a lane's
         steps end where its time reaches ``t_final`` (then it takes empty steps); wall time: the batch's
         per member plus a share of this pass."""
@@ -302,11 +306,13 @@ class _BatchRun:
                                                   records[s:s + k + 1, nv, j], records[s:s + k + 1, :n, j], k), common)
         self.short.clear()
 
-    def finish_checked(self, results: list[Trajectory | IntegrationError]) -> None:
+    def finish_checked(self, results: list[Trajectory | IntegrationError | None]) -> None:
         """:meth:`finish` when the points are the check points: every short run's samples and check points
         are rows of its ``propagate_grid`` output."""
         tic = time.perf_counter()
         n = self.ts.n_state
+        check_times = self.check_times
+        assert check_times is not None  # called when there are check points (check_rows is not None)
         grids = np.stack([short[5] for short in self.short])  # batch, time, variable, lane
         samples = grids[:, self.where]
         # batch, lane, time, variable: each member's check points one contiguous block
@@ -314,10 +320,11 @@ class _BatchRun:
         tau = samples[:, :, n] if self.ts.has_tau else None
         share = (time.perf_counter() - tic) / sum(short[1] for short in self.short)
         for b, (first, count, start, end, nsteps, _) in enumerate(self.short):
+            assert isinstance(nsteps, list)  # a checked short run keeps the steps per lane, not a log offset
             common = (self.grid, "heyoka", self.tol, (end - start) / count + share, self.versions)
             for j in range(count):
                 results[first + j] = _trajectory((samples[b, :, :n, j], None if tau is None else tau[b, :, j],
-                                                  self.check_times, checks[b, j], nsteps[j]), common)
+                                                  check_times, checks[b, j], nsteps[j]), common)
         self.short.clear()
 
     def long_run(self, recorders: list[StepRecorder], out: np.ndarray, nsteps: np.ndarray,

@@ -521,8 +521,9 @@ def isomorphism_evidence(system: MechanicalSystem, parameters: np.ndarray, t: np
             tolerance=cmp.tolerance if whole else TRAJECTORY_TOLERANCE_FLOOR,
             passed=bool((whole or local) and constant), detail=detail))
         if m.inverse is not None:
-            k = kernels(m)
-            back = k.inverse(apply(m, parameters, states[idx])["states"], parameters)  # type: ignore[misc]
+            inverse = kernels(m).inverse
+            assert inverse is not None  # compiled whenever the map has an inverse
+            back = inverse(apply(m, parameters, states[idx])["states"], parameters)
             err = float(np.max(np.abs(back - states[idx])) / max(float(np.max(np.abs(states[idx]))), 1e-300))
             out.append(CheckEvidence(
                 name=f"isomorphism:{name}", quantity="inverse map", formula=m.formula, equation=m.equation,

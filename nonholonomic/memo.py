@@ -168,7 +168,7 @@ def keep(key: str, value: T) -> T:
     except Exception:  # e.g. a compiled integrator inside: computed again next time
         return value
     memo.save(key, data)
-    return read_back  # type: ignore[no-any-return]
+    return read_back
 
 
 def remember(namespace: str, inputs: object, compute: Callable[[], T]) -> T:
@@ -180,7 +180,7 @@ def remember(namespace: str, inputs: object, compute: Callable[[], T]) -> T:
     if not found:
         value = keep(key, compute())
     _note_origin(value, key)
-    return value  # type: ignore[no-any-return]
+    return value
 
 
 def remembered(namespace: str) -> Callable[[Callable[..., T]], Callable[..., T]]:

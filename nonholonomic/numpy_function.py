@@ -28,7 +28,7 @@ def _numpy_namespace() -> dict[str, Any]:
 def _compiled(source: str) -> Callable[..., Any]:
     namespace = dict(_numpy_namespace())
     exec(compile(source, f"<{GENERATED_NAME}>", "exec"), namespace)  # noqa: S102 - source lambdify wrote
-    return namespace[GENERATED_NAME]  # type: ignore[no-any-return]
+    return namespace[GENERATED_NAME]
 
 
 class NumpyFunction:

@@ -53,7 +53,7 @@ def linear(on: str = "gamma", also_on: str | None = None, unit: str = "kg m^2/s^
     """``U = (a, v)`` on the vector ``on`` (plus ``(b, w)`` on ``also_on``); ``unit`` is a's (and b's)
     unit: energy for a unit vector, force (kg m/s^2) for a position."""
     a, par_a = _vector("a", f"field vector of the linear potential (a, {on})", unit)
-    parameters = (par_a,)
+    parameters: tuple[Parameter, ...] = (par_a,)
     formula = f"U = (a, {on})"
     if also_on is not None:
         b, par_b = _vector("b", f"field vector of the term (b, {also_on})", unit)

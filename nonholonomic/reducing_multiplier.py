@@ -620,7 +620,7 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
     if domain is not None:
         W = None if shift is None else tuple(
             sp.sympify(w).xreplace({multiplier_symbol: N} if multiplier_symbol is not None else {}) for w in shift)
-        monopole = monopole_charge(S_bar, q, domain, sampler.values, shift=W)  # type: ignore[arg-type]
+        monopole = monopole_charge(S_bar, q, domain, sampler.values, shift=W)
         monopole["detail"] += sampler.note()
     elif B == 0:
         monopole = {"integral": 0.0, "exact": True, "detail": "S_bar = 0: no gyroscopic 2-form"}

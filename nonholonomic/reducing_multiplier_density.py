@@ -86,7 +86,7 @@ def _density_ansatz(A1: sp.Expr, A2: sp.Expr, extra: tuple[sp.Expr, ...], q: tup
     k = np.zeros(nf + 2)
     if keep:
         k[keep] = np.linalg.lstsq(M_arr[:, keep], y_arr, rcond=None)[0]
-    if np.linalg.norm(M_arr @ k - y_arr) > 1e-7 * max(np.linalg.norm(y_arr), 1e-300):
+    if np.linalg.norm(M_arr @ k - y_arr) > 1e-7 * max(float(np.linalg.norm(y_arr)), 1e-300):
         return None
     exps = []
     for kj in k[:nf]:

@@ -33,6 +33,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import TypedDict
 
 import heyoka as hy
 import numpy as np
@@ -167,7 +168,22 @@ def taylor_system(system: MechanicalSystem) -> TaylorSystem:
     return TaylorSystem(system=system, **form)
 
 
-def _taylor_form(system: MechanicalSystem) -> dict[str, object]:
+class _TaylorForm(TypedDict):
+    """The fields of a :class:`TaylorSystem` but ``system`` (what :func:`_taylor_form` returns and the memo keeps)."""
+
+    variables: tuple[hy.expression, ...]
+    rhs: tuple[hy.expression, ...]
+    n_state: int
+    has_tau: bool
+    n_pars: int
+    derived_parameters: tuple[sp.Expr, ...]
+    operations: int
+    strategy: str
+    _derived: Callable[..., list[object]] | None
+    _parameters: _Parameters
+
+
+def _taylor_form(system: MechanicalSystem) -> _TaylorForm:
     """Every field of the :class:`TaylorSystem` of ``system`` but the system itself (it pickles)."""
     names = [str(s) for s in system.state_symbols] + (["tau"] if system.reduced_time else [])
     hvars = hy.make_vars(*names)
@@ -432,7 +448,8 @@ class _Generator:
             return self.symbol(expr)
         if expr.is_Add:
             params = [a for a in expr.args if self.is_param(a)]
-            pos, neg = [], []
+            pos: list[int] = []
+            neg: list[int] = []
             for a in expr.args:
                 if not self.is_param(a):
                     minus = a.could_extract_minus_sign()
@@ -442,7 +459,8 @@ class _Generator:
             return _combine(self.emitter, pos, neg)
         if expr.is_Mul:
             coeff = sp.Mul(*[a for a in expr.args if self.is_param(a)])
-            num, den = [], []
+            num: list[int] = []
+            den: list[int] = []
             for a in expr.args:
                 if self.is_param(a):
                     continue
@@ -506,7 +524,8 @@ class _Generator:
     def emit(self, node: _Node) -> tuple[int, int]:
         """``(sign, node id)`` of a Horner node."""
         if isinstance(node, list):  # a sum
-            pos, neg = [], []
+            pos: list[int] = []
+            neg: list[int] = []
             for child in node:
                 sign, i = self.emit(child)
                 (pos if sign > 0 else neg).append(i)
@@ -594,7 +613,7 @@ def _common_powers(dicts: list[dict[sp.Expr, sp.Expr]]) -> dict[sp.Expr, sp.Expr
     for b, e in dicts[0].items():
         exps = [d.get(b) for d in dicts]
         if all(x is not None and x.is_number and e.is_number and bool(x > 0) == bool(e > 0) for x in exps):
-            common[b] = min(exps, key=abs)  # type: ignore[arg-type]
+            common[b] = min((x for x in exps if x is not None), key=abs)  # none is None (checked just above)
     return common
 
 

@@ -44,7 +44,7 @@ class PoincareRequest(BaseModel):
 
     def options(self) -> SectionOptions:
         return SectionOptions(self.surface, self.value, self.direction,
-                              tuple(self.coordinates) if self.coordinates else None,  # type: ignore[arg-type]
+                              (self.coordinates[0], self.coordinates[1]) if self.coordinates else None,
                               self.max_points)
 
     def problems(self, system: MechanicalSystem, prefix: str = "poincare") -> list[FieldProblem]:

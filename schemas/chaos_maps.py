@@ -80,4 +80,4 @@ def map_arrays(request: Mapping[str, Any], members: Iterable[Mapping[str, Any]],
                 values[name][i, j] = v
         for name, v in block.get("integral_drift", {}).items():
             drift.setdefault(name, np.full(shape, np.nan))[i, j] = v
-    return MapArrays(names, axes, status, values, drift, branches)  # type: ignore[arg-type]
+    return MapArrays(names, axes, status, values, drift, branches)

@@ -11,7 +11,16 @@ from __future__ import annotations
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ModelWrapValidatorHandler,
+    PositiveFloat,
+    PrivateAttr,
+    field_validator,
+    model_validator,
+)
 
 from nonholonomic.analysis.chaos_map import MapOptions
 from nonholonomic.analysis.ensemble import Member, default_chunk_size, plan
@@ -26,7 +35,7 @@ from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems, t_fina
 from schemas.results import MemberResultModel
 from schemas.settings import get_settings
 from schemas.sweeps import sweep_target, swept
-from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step
+from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step, state_renamed
 
 ENSEMBLE_JOB = "ensemble"
 #: Cells of a map completed at validation (evenly spread; the chunks complete every one).
@@ -90,10 +99,17 @@ class GridMembers(BaseModel):
         return v
 
     def grid(self) -> Grid:
+        ranges = None if self.ranges is None else ((self.ranges[0][0], self.ranges[0][1]),
+                                                   (self.ranges[1][0], self.ranges[1][1]))
         return Grid(self.surface, self.value, (self.coordinates[0], self.coordinates[1]), dict(self.level),
-                    (self.shape[0], self.shape[1]),
-                    None if self.ranges is None else (tuple(self.ranges[0]), tuple(self.ranges[1])),  # type: ignore[arg-type]
-                    self.direction, self.sheet)
+                    (self.shape[0], self.shape[1]), ranges, self.direction, self.sheet)
+
+
+EnsembleCheck = Literal["integrals", "measure"]
+
+
+def _integrals_only() -> list[EnsembleCheck]:
+    return ["integrals"]
 
 
 class MembersSpec(BaseModel):
@@ -122,7 +138,8 @@ class MembersSpec(BaseModel):
             return self.sample.count
         if self.grid is not None:
             return self.grid.shape[0] * self.grid.shape[1]
-        return len(self.sweep.values)  # type: ignore[union-attr]
+        assert self.sweep is not None  # exactly one of the four is given (_exactly_one)
+        return len(self.sweep.values)
 
 
 class EnsembleRequest(BaseModel):
@@ -139,8 +156,8 @@ class EnsembleRequest(BaseModel):
     members: MembersSpec
     t_final: FiniteFloat = Field(gt=0, description="end of each member's integration [s]")
     samples: int = Field(2, ge=2, description="sample times per member (both ends included)")
-    checks: list[Literal["integrals", "measure"]] = Field(
-        default_factory=lambda: ["integrals"],
+    checks: list[EnsembleCheck] = Field(
+        default_factory=_integrals_only,
         description="evidence per member (the integrals at its samples and 64 equally spaced check points, "
                     "not every step)")
     poincare: PoincareRequest | None = None
@@ -154,6 +171,29 @@ class EnsembleRequest(BaseModel):
     thresholds: dict[str, PositiveFloat] | None = Field(
         None, description="indicator -> value above which a cell is chaotic (default: megno 3, fli ln T + 3, "
                           "lyapunov (ln T + 3)/T)")
+    #: Notes on the old names the request used (schemas.deprecations).
+    _deprecations: list[str] = PrivateAttr(default_factory=list)
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _old_names(cls, data: Any, handler: ModelWrapValidatorHandler[EnsembleRequest]) -> Any:
+        ensemble = handler(data)
+        notes = ensemble.system.deprecations()
+        members = ensemble.members
+        states = members.initial_states if members.initial_states is not None else []
+        for i, state in enumerate(states):
+            states[i], renamed = state_renamed(ensemble.system, state, f"members.initial_states[{i}].")
+            notes += renamed
+        if members.sweep is not None:
+            members.sweep.initial_state, renamed = state_renamed(ensemble.system, members.sweep.initial_state,
+                                                                 "members.sweep.initial_state.")
+            notes += renamed
+        ensemble._deprecations = notes
+        return ensemble
+
+    def deprecations(self) -> list[str]:
+        """Notes on the deprecated names this request used, for the answer (empty if none)."""
+        return list(self._deprecations)
 
     @model_validator(mode="after")
     def _map_fields(self) -> EnsembleRequest:
@@ -184,15 +224,15 @@ class EnsembleRequest(BaseModel):
     def definition(self) -> MechanicalSystem:
         """The members' shared definition (a sweep of a user-written system's parameter: its generic one)."""
         if self.members.sweep is not None and hasattr(self.system, "generic_definition"):
-            return self.system.generic_definition()  # type: ignore[no-any-return]
-        return self.system.definition()  # type: ignore[attr-defined]
+            return self.system.generic_definition()
+        return self.system.definition()
 
     def effective_chunk_size(self, system: MechanicalSystem | None = None) -> int:
         """``chunk_size``, else about a second of work per chunk, larger when that would make more than
         ``max_ensemble_chunks`` chunks (each is a message the POST sends)."""
         if self.chunk_size:
             return self.chunk_size
-        size = default_chunk_size(system or self.system.outline(), self.t_final,  # type: ignore[attr-defined]
+        size = default_chunk_size(system or self.system.outline(), self.t_final,
                                   poincare=self.poincare.options() if self.poincare else None,
                                   lyapunov=self.lyapunov.options() if self.lyapunov else None,
                                   indicators=bool(self.indicators))
@@ -204,7 +244,7 @@ class EnsembleRequest(BaseModel):
 
     def expressions(self) -> list[tuple[str, str]]:
         """Every expression the user wrote, by field path: the system's and the surface."""
-        found = self.system.expressions()  # type: ignore[attr-defined]
+        found = self.system.expressions()
         grid = self.members.grid
         return (found + ([("poincare.surface", self.poincare.surface)] if self.poincare is not None else [])
                 + ([("members.grid.sheet", grid.sheet)] if grid is not None and grid.sheet else []))
@@ -213,7 +253,7 @@ class EnsembleRequest(BaseModel):
         """Everything wrong with the request, each member's state included, before anything is queued
         (``step(fields)`` is told which fields each stage reads, as for a job)."""
         settings = get_settings()
-        system, found = self.system.checked_definition(step)  # type: ignore[attr-defined]
+        system, found = self.system.checked_definition(step)
         if system is None:
             return found
         count = self.members.count
@@ -234,7 +274,7 @@ class EnsembleRequest(BaseModel):
         found += self._chunk_problems(system, count, settings.max_queued_messages)
         if found:
             return found
-        step([field for field, _ in self.system.expressions()] or ["members"])  # type: ignore[attr-defined]
+        step([field for field, _ in self.system.expressions()] or ["members"])
         return self._member_problems(system)
 
     def _chunk_problems(self, system: MechanicalSystem, count: int, max_queued: int) -> list[FieldProblem]:
@@ -257,13 +297,13 @@ class EnsembleRequest(BaseModel):
                                     f"{max_queued * size} members, or larger chunks")]
 
     def _member_problems(self, system: MechanicalSystem) -> list[FieldProblem]:
-        parameters = self.system.parameter_values()  # type: ignore[attr-defined]
+        parameters = self.system.parameter_values()
         project = self.project_initial_state
         spec = self.members
         found: list[FieldProblem] = []
         if spec.initial_states is not None:
             for i, state in enumerate(spec.initial_states):
-                for p in self.system.state_problems(system, parameters, state, project):  # type: ignore[attr-defined]
+                for p in self.system.state_problems(system, parameters, state, project):
                     found.append(FieldProblem(p.field.replace("initial_state", f"members.initial_states[{i}]", 1),
                                               p.reason))
                 if len(found) >= 20:
@@ -280,7 +320,7 @@ class EnsembleRequest(BaseModel):
                 except ValueError as exc:
                     found.append(FieldProblem(f"members.sweep.values[{i}]", str(exc)))
                     continue
-                for p in self.system.state_problems(system, values, spec.sweep.initial_state,  # type: ignore[attr-defined]
+                for p in self.system.state_problems(system, values, spec.sweep.initial_state,
                                                     project):
                     found.append(FieldProblem(p.field.replace("initial_state", "members.sweep.initial_state", 1),
                                               f"{p.reason} (with {spec.sweep.parameter} = {value:g})"))
@@ -289,7 +329,7 @@ class EnsembleRequest(BaseModel):
         elif spec.grid is not None:  # a sample of the cells, spread over the grid: a grid's problems are structural
             try:
                 cells = np.unique(np.linspace(0, spec.count - 1, min(spec.count, VALIDATED_CELLS)).round().astype(int))
-                complete(system, parameter_vector(system, self.system.parameter_values()),  # type: ignore[attr-defined]
+                complete(system, parameter_vector(system, self.system.parameter_values()),
                          spec.grid.grid(), self.grid_ranges(system), indices=cells)
             except LevelProblem as exc:
                 found.append(FieldProblem(exc.field, exc.reason))
@@ -310,13 +350,15 @@ class EnsembleRequest(BaseModel):
         LevelProblem
             If the grid cannot be built (:class:`~nonholonomic.analysis.grid.GridError`).
         """
-        grid = self.members.grid.grid()  # type: ignore[union-attr]
+        members = self.members.grid
+        assert members is not None  # a chaos map's: members.grid is given
+        grid = members.grid()
         system = system or self.definition()
         try:
             plan_grid(system, grid)
             if grid.ranges is not None:
                 return grid.ranges
-            p = parameter_vector(system, self.system.parameter_values())  # type: ignore[attr-defined]
+            p = parameter_vector(system, self.system.parameter_values())
             return default_ranges(system, p, grid)
         except GridError as exc:
             raise LevelProblem(f"members.grid.{exc.field}", exc.reason) from None
@@ -333,7 +375,7 @@ class EnsembleRequest(BaseModel):
             If the level set cannot be sampled (names it cannot fix, an unreachable level).
         """
         system = self.definition()
-        parameters = self.system.parameter_values()  # type: ignore[attr-defined]
+        parameters = self.system.parameter_values()
         spec = self.members
         stop = spec.count if stop is None else stop
         p = parameter_vector(system, parameters)
@@ -363,8 +405,9 @@ class EnsembleRequest(BaseModel):
         from nonholonomic.analysis.sampling import LevelError, on_level
 
         sample = spec.sample
+        assert sample is not None  # exactly one of the four is given (MembersSpec._exactly_one)
         try:
-            states = on_level(system, p, sample.level, stop, sample.seed)  # type: ignore[union-attr]
+            states = on_level(system, p, sample.level, stop, sample.seed)
         except LevelError as exc:
             raise LevelProblem(f"members.sample.{exc.field}", exc.reason) from None
         return [Member(i, p, states[i]) for i in range(start, stop)]
@@ -388,6 +431,8 @@ class EnsembleAccepted(BaseModel):
     location: str
     members: int
     chunks: int
+    deprecations: list[str] = Field(default_factory=list, description="notes on deprecated names the request "
+                                                                      "used, each saying what replaces it")
 
 
 class EnsembleView(BaseModel):

@@ -44,7 +44,7 @@ class ExploreSection(BaseModel):
             du, dv = 1e-9 * max(1.0, abs(u)), 1e-9 * max(1.0, abs(v))
             ranges = ((u - du, u + du), (v - dv, v + dv))
         return Grid(self.surface, self.value, (self.coordinates[0], self.coordinates[1]), dict(self.level), (1, 1),
-                    ranges, self.direction, self.sheet)  # type: ignore[arg-type]
+                    ranges, self.direction, self.sheet)
 
 
 class ExplorePlaneRequest(BaseModel):
@@ -86,11 +86,11 @@ class ExplorePeriodicRequest(ExplorePlaneRequest):
 def plane_problems(request: ExplorePlaneRequest) -> tuple[MechanicalSystem | None, np.ndarray | None,
                                                             list[FieldProblem]]:
     """The system built and the plane checked: (system, parameters, problems)."""
-    checked, found = request.system.checked_definition()  # type: ignore[attr-defined]
+    checked, found = request.system.checked_definition()
     if checked is None or found:
         return None, None, found
-    system = request.system.definition()  # type: ignore[attr-defined]
-    p = parameter_vector(system, request.system.parameter_values())  # type: ignore[attr-defined]
+    system = request.system.definition()
+    p = parameter_vector(system, request.system.parameter_values())
     try:
         plan(system, request.section.grid())
     except GridError as exc:
@@ -112,8 +112,9 @@ def clicked_state(system: MechanicalSystem, p: np.ndarray, section: ExploreSecti
                   point: list[float]) -> tuple[np.ndarray | None, int, list[FieldProblem]]:
     """The state on the level at ``point`` crossing the section the asked way (the first of ``branches``)."""
     grid = section.grid(point)
+    assert grid.ranges is not None  # a cell centred on the point: its ranges are set
     try:
-        cells = complete(system, p, grid, grid.ranges)  # type: ignore[arg-type]
+        cells = complete(system, p, grid, grid.ranges)
     except GridError as exc:
         return None, 0, [FieldProblem(f"section.{exc.field}", exc.reason)]
     if cells.branches[0] == 0:

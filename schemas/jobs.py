@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ModelWrapValidatorHandler,
+    PrivateAttr,
+    field_validator,
+    model_validator,
+)
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.claims import MAX_CLAIMS, parse_claim
@@ -18,9 +26,10 @@ from schemas.periodic_orbits import PeriodicOrbitRequest
 from schemas.report import PaperReport
 from schemas.results import SimulationResultModel
 from schemas.settings import get_settings
-from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step
+from schemas.systems import FiniteFloat, JobSystemSpec, StateVec, Step, no_step, state_renamed
 
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+JobCheck = Literal["integrals", "measure", "bracket", "euler_angles", "isomorphisms"]
 TERMINAL_STATUSES: frozenset[str] = frozenset({"succeeded", "failed", "cancelled"})
 
 
@@ -76,12 +85,13 @@ class JobRequest(BaseModel):
     system: JobSystemSpec
     initial_state: dict[str, StateVec] = Field(
         description="state vectors by name (the catalog lists them), e.g. {'M': [..], 'gamma': [..]}; "
-                    "for the ball 'omega' may replace 'M'; for a generalized_chaplygin system 'q' and 'qdot', "
-                    "two components each; for a lagrangian system 'q' and 'q_dot', one per coordinate")
+                    "for the ball 'omega' may replace 'M'; for a system written by the user 'q' and 'q_dot', one "
+                    "component per coordinate (a generalized_chaplygin system: two; its former 'qdot' is still "
+                    "read, deprecated)")
     t_final: FiniteFloat = Field(gt=0, description="end of the integration interval [0, t_final], in s")
     samples: int = Field(201, ge=2, description="number of equally spaced sample times, both ends included")
-    checks: list[Literal["integrals", "measure", "bracket", "euler_angles", "isomorphisms"]] = Field(
-        default_factory=lambda: list(DEFAULT_CHECKS),
+    checks: list[JobCheck] = Field(
+        default_factory=lambda: cast(list[JobCheck], list(DEFAULT_CHECKS)),  # the core's names are str
         description="evidence to compute (default integrals and measure); 'bracket' (Hamiltonian form after the "
                     "time substitution), 'euler_angles' (local forms) and 'isomorphisms' (the paper's maps to "
                     "e(3), Neumann, Clebsch, Veselova) where the catalog lists them")
@@ -101,6 +111,20 @@ class JobRequest(BaseModel):
                     "symbolically (dI/dt = sum dI/dx_i f_i identically zero, within the work limits)")
 
     _t_final_limit = field_validator("t_final")(t_final_within_limit)
+    #: Notes on the old names the request used (schemas.deprecations).
+    _deprecations: list[str] = PrivateAttr(default_factory=list)
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _old_names(cls, data: Any, handler: ModelWrapValidatorHandler[JobRequest]) -> Any:
+        job = handler(data)
+        job.initial_state, notes = state_renamed(job.system, job.initial_state, "initial_state.")
+        job._deprecations = [*job.system.deprecations(), *notes]
+        return job
+
+    def deprecations(self) -> list[str]:
+        """Notes on the deprecated names this request used, for the answer (empty if none)."""
+        return list(self._deprecations)
 
     @field_validator("samples")
     @classmethod
@@ -112,7 +136,7 @@ class JobRequest(BaseModel):
 
     def expressions(self) -> list[tuple[str, str]]:
         """Every expression the user wrote, by field path: the system's, the surface, the claims."""
-        found = self.system.expressions()  # type: ignore[attr-defined]
+        found = self.system.expressions()
         if self.poincare is not None:
             found.append(("poincare.surface", self.poincare.surface))
         if self.periodic_orbit is not None:
@@ -123,13 +147,13 @@ class JobRequest(BaseModel):
         """Violations only the physics can see: the expressions read by sympy, state names, |γ| = 1, the
         engine's tolerance range. ``step(fields)`` is told which fields each stage reads (a validation
         safety cap names them if it stops the check)."""
-        system, found = self.system.checked_definition(step)  # type: ignore[attr-defined]
+        system, found = self.system.checked_definition(step)
         if system is None:
             return found
         found = [FieldProblem(f"checks[{i}]", f"{check!r} is not available for {system.kind}; "
                                               f"available: {', '.join(available_checks(system))}")
                  for i, check in enumerate(self.checks) if check not in available_checks(system)]
-        found += self.system.state_problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
+        found += self.system.state_problems(system, self.system.parameter_values(),
                                             self.initial_state, self.project_initial_state)
         found += analysis_problems(system, self.integrator, self.t_final, self.poincare, self.lyapunov, step)
         if self.periodic_orbit is not None:
@@ -137,7 +161,7 @@ class JobRequest(BaseModel):
             if self.integrator.engine != "heyoka":
                 found.append(FieldProblem("integrator.engine", "periodic_orbit needs heyoka (events and the "
                                                                "variational equations)"))
-            found += self.periodic_orbit.problems(system, self.system.parameter_values(),  # type: ignore[attr-defined]
+            found += self.periodic_orbit.problems(system, self.system.parameter_values(),
                                                   self.t_final, self.integrator.tolerance)
         for i, claim in enumerate(self.claims):
             step([f"claims[{i}].expression"])
@@ -175,6 +199,9 @@ class JobAccepted(BaseModel):
     id: str
     status: JobStatus
     location: str
+    deprecations: list[str] = Field(
+        default_factory=list, description="notes on deprecated names the request used (e.g. a generalized "
+                                          "Chaplygin system's `lagrangian`, now `L`), each saying what replaces it")
 
 
 class JobError(BaseModel):

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Any, Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 #: The job's marker in the stored request (simulation jobs have a ``system`` instead).
-REPORT_JOB = "paper_report"
+REPORT_JOB: Final = "paper_report"
 
 
 class PaperReportRequest(BaseModel):

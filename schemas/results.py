@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import asdict
 from typing import Any, Literal
 
@@ -281,13 +282,14 @@ def first_non_finite(value: Any, path: str = "") -> tuple[str, float] | None:
     """
     if isinstance(value, float):
         return None if math.isfinite(value) else (path, value)
+    items: Iterable[tuple[Any, Any]]
     if isinstance(value, dict):
         items = value.items()
     elif isinstance(value, (list, tuple)):
         if value and all(isinstance(v, float) for v in value):  # a numeric row: one vectorised test
             bad = next((i for i, v in enumerate(value) if not math.isfinite(v)), None)
             return None if bad is None else (f"{path}[{bad}]", value[bad])
-        items = ((f"[{i}]", v) for i, v in enumerate(value))  # type: ignore[assignment]
+        items = ((f"[{i}]", v) for i, v in enumerate(value))
     else:
         return None
     for key, item in items:

@@ -10,12 +10,13 @@ seconds. ``budget_s`` is deprecated and ignored (the answer's ``deprecations`` s
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, Strict, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ModelWrapValidatorHandler, PrivateAttr, Strict, model_validator
 
 from nonholonomic import work_limits
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE
+from schemas.deprecations import RENAMED_FIELDS, renamed
 
 #: A named constant's value (as a system parameter's: beyond, the pointwise checks overflow).
 Constant = Annotated[float, Strict(), Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE,
@@ -115,14 +116,16 @@ class MonopoleRequest(BaseModel):
 
 
 class HamiltonizeRequest(BaseModel):
-    """A generalized Chaplygin system with two degrees of freedom (eq. 2704-7)."""
+    """A generalized Chaplygin system with two degrees of freedom (eq. 2704-7). ``lagrangian`` is the old name
+    of ``L`` (still read, with a note in the answer's ``deprecations``: :mod:`schemas.deprecations`)."""
 
     model_config = ConfigDict(extra="forbid")
 
-    lagrangian: Expression = Field(description="L(q1, q2, q1dot, q2dot), quadratic in the velocities")
+    L: Expression = Field(description="L(q1, q2, q1_dot, q2_dot), quadratic in the velocities; formerly "
+                                      "`lagrangian` (still read, deprecated)")
     coordinates: list[Name] = Field(min_length=2, max_length=2)
     velocities: list[Name] = Field(min_length=2, max_length=2)
-    a1: Expression = Field(description="S = a1(q) q1dot + a2(q) q2dot + b(q) (eq. 2704-7)")
+    a1: Expression = Field(description="S = a1(q) q1_dot + a2(q) q2_dot + b(q) (eq. 2704-7)")
     a2: Expression
     b: Expression
     potential: Expression | None = Field(None, description="U(q), if not already in the Lagrangian")
@@ -132,6 +135,20 @@ class HamiltonizeRequest(BaseModel):
     budget_s: float | None = Field(None, gt=0, le=MAX_BUDGET_S, deprecated=True, description=_BUDGET_S_DESCRIPTION)
     monopole: MonopoleRequest | None = Field(
         None, description="integrate S_bar dq1^dq2 over a chart: exact (integral 0) or a monopole")
+    #: Notes on the old names the request used.
+    _renamed: list[str] = PrivateAttr(default_factory=list)
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _old_names(cls, data: Any, handler: ModelWrapValidatorHandler[HamiltonizeRequest]) -> Any:
+        data, notes = renamed(data, RENAMED_FIELDS, "")
+        request = handler(data)
+        request._renamed = notes
+        return request
+
+    def renamed_fields(self) -> list[str]:
+        """Notes on the old names this request used (empty if none)."""
+        return list(self._renamed)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -252,7 +269,7 @@ class HamiltonizeResult(_Answer):
 class HamiltonizeExample(_Answer):
     """A ready-to-post ``POST /v1/hamiltonize`` body (add ``parameters`` for the constants if you like)."""
 
-    lagrangian: str
+    L: str
     a1: str
     a2: str
     b: str

@@ -10,9 +10,21 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Mapping, Sequence
 from functools import lru_cache
-from typing import Annotated, Any, Literal, Union
+from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal, TypeAlias, Union
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, Strict, ValidationInfo, create_model, field_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ModelWrapValidatorHandler,
+    PrivateAttr,
+    Strict,
+    ValidationInfo,
+    create_model,
+    field_validator,
+    model_validator,
+)
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
 from nonholonomic.expressions import ExpressionError, check_expression, declare_symbols
@@ -34,10 +46,17 @@ from nonholonomic.systems import (
 )
 from nonholonomic.systems.ball_on_surface import SURFACE_VARIABLES, Surface, surface
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE as GENERALIZED_CHAPLYGIN_EXAMPLE
+from schemas.deprecations import RENAMED_FIELDS, RENAMED_STATE, renamed
 
 FiniteFloat = Annotated[float, Strict(), Field(allow_inf_nan=False)]
 #: ``step(fields)``: the validation is about to read these fields (the safety cap names them if it stops the check).
 Step = Callable[[Sequence[str]], None]
+
+
+def state_renamed(system: SystemSpec, state: Any, where: str) -> tuple[Any, list[str]]:
+    """An initial state with the former names of ``system``'s state vectors given their new ones, and the
+    notes saying so (:mod:`schemas.deprecations`)."""
+    return renamed(state, system.renamed_state, where) if system.renamed_state else (state, [])
 
 
 def no_step(fields: Sequence[str]) -> None:
@@ -79,9 +98,10 @@ def _parameter_field(par: Parameter) -> tuple[Any, Any]:
     if par.minimum is not None:
         bounds.pop("ge")
         bounds["gt" if par.strict else "ge"] = par.minimum
-    number = Annotated[float, Strict(), Field(allow_inf_nan=False, **bounds)]
+    bounded = Annotated[float, Strict(), Field(allow_inf_nan=False, **bounds)]
+    number: Any = bounded
     if par.strict and par.minimum == 0:  # the core's smallest positive value, checked per component
-        number = Annotated[number, AfterValidator(_at_least_min_positive)]
+        number = Annotated[bounded, AfterValidator(_at_least_min_positive)]
     annotation: Any = number
     if par.shape == "vector":
         annotation = Annotated[list[number], Field(min_length=3, max_length=3)]
@@ -100,7 +120,7 @@ class PotentialSpec(BaseModel):
 
     def core(self, kind: str) -> str | Potential:
         """What :func:`nonholonomic.systems.get_system` takes for this potential of ``kind``."""
-        return self.kind  # type: ignore[attr-defined,no-any-return]
+        return self.kind  # type: ignore[attr-defined]  # create_model's field
 
 
 ParameterFloat = Annotated[float, Strict(), Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE,
@@ -176,12 +196,13 @@ def _expression_model(kind: str) -> type[PotentialSpec]:
             return text  # the parameters are refused already
         return expression_checked(text, [*POTENTIAL_NAMES[kind], *info.data["parameters"]])
 
-    return create_model(  # type: ignore[call-overload]
+    validators = {"names": field_validator("parameters")(classmethod(names)),
+                  "parsed": field_validator("U")(classmethod(parsed))}
+    return create_model(
         f"{_camel(kind)}ExpressionPotential",
         __base__=ExpressionPotentialSpec,
         __doc__=f"U written as an expression in {', '.join(POTENTIAL_NAMES[kind])} and its own parameters",
-        __validators__={"names": field_validator("parameters")(classmethod(names)),  # type: ignore[arg-type]
-                        "parsed": field_validator("U")(classmethod(parsed))},  # type: ignore[arg-type]
+        __validators__=validators,  # type: ignore[arg-type]  # the stub takes callables; these are classmethods
     )
 
 
@@ -241,20 +262,30 @@ class SystemSpec(BaseModel):
     on a surface of the user's own, ``surface``)."""
 
     model_config = ConfigDict(extra="forbid", json_schema_extra=_keep_client_names)
+    # kind, potential (and surface) are fields of each kind's own model, added by create_model (_system_model)
+    #: Former names of this kind's state vectors, still read (old → new; schemas.deprecations).
+    renamed_state: ClassVar[dict[str, str]] = {}
+    #: Notes on the old names the request used (schemas.deprecations).
+    _deprecations: list[str] = PrivateAttr(default_factory=list)
+
+    def deprecations(self) -> list[str]:
+        """Notes on the deprecated names this system was sent with (empty if none)."""
+        return list(self._deprecations)
 
     def parameter_values(self) -> dict[str, Any]:
         """Every parameter group by name, the potential's and the surface's included (the core's input)."""
         values = self.model_dump(exclude={"kind", "potential", "surface"})
-        values.update(self.potential.parameter_values())  # type: ignore[attr-defined]
+        values.update(self.potential.parameter_values())  # type: ignore[attr-defined]  # create_model's field
         if getattr(self, "surface", None) is not None:
-            values.update(self.surface.parameters)  # type: ignore[attr-defined]
+            values.update(self.surface.parameters)  # type: ignore[attr-defined]  # create_model's field
         return values
 
     def definition(self) -> MechanicalSystem:
         """The core's symbolic definition for this kind and potential (and surface)."""
         on = getattr(self, "surface", None)
-        return get_system(self.kind, self.potential.core(self.kind),  # type: ignore[attr-defined]
-                          None if on is None else on.core())
+        kind: str = self.kind  # type: ignore[attr-defined]  # create_model's field
+        potential: PotentialSpec = self.potential  # type: ignore[attr-defined]  # create_model's field
+        return get_system(kind, potential.core(kind), None if on is None else on.core())
 
     def validation_definition(self) -> MechanicalSystem:
         """The definition without its structure searches (the same as :meth:`definition` but for kinds whose
@@ -275,10 +306,12 @@ class SystemSpec(BaseModel):
     def expressions(self) -> list[tuple[str, str]]:
         """The expressions the user wrote in this block, by field path (``system.potential.U`` ...)."""
         found = []
-        if isinstance(self.potential, ExpressionPotentialSpec):  # type: ignore[attr-defined]
-            found.append(("system.potential.U", self.potential.U))  # type: ignore[attr-defined]
-        if getattr(self, "surface", None) is not None:
-            found.append(("system.surface.Phi", self.surface.Phi))  # type: ignore[attr-defined]
+        potential: PotentialSpec = self.potential  # type: ignore[attr-defined]  # create_model's field
+        if isinstance(potential, ExpressionPotentialSpec):
+            found.append(("system.potential.U", potential.U))
+        on = getattr(self, "surface", None)
+        if on is not None:
+            found.append(("system.surface.Phi", on.Phi))
         return found
 
     def checked_definition(self, step: Step = no_step) -> tuple[MechanicalSystem | None, list[FieldProblem]]:
@@ -286,9 +319,10 @@ class SystemSpec(BaseModel):
         field; ``step`` is told which fields each stage reads."""
         fields = [field for field, _ in self.expressions()]
         step(fields or ["system"])
-        kind: str = self.kind  # type: ignore[attr-defined]
+        kind: str = self.kind  # type: ignore[attr-defined]  # create_model's field
         own = own_names(kind) if fields else frozenset()
-        potential, on = self.potential, getattr(self, "surface", None)  # type: ignore[attr-defined]
+        potential: PotentialSpec = self.potential  # type: ignore[attr-defined]  # create_model's field
+        on = getattr(self, "surface", None)
         declared = {"system.potential": potential.parameter_values() if "system.potential.U" in fields else {},
                     "system.surface": on.parameters if "system.surface.Phi" in fields and on is not None else {}}
         for block, names in declared.items():
@@ -296,7 +330,7 @@ class SystemSpec(BaseModel):
             if taken:
                 return None, [FieldProblem(f"{block}.parameters", _taken(taken, kind))]
         for field, read in (("system.potential.U", lambda: potential.core(kind)),
-                            ("system.surface.Phi", lambda: on.core())):  # type: ignore[union-attr]
+                            ("system.surface.Phi", lambda: on.core())):  # type: ignore[union-attr]  # with a surface
             if field in fields:
                 step([field])
                 try:
@@ -319,7 +353,7 @@ def _names_apart(cls: type, potential: PotentialSpec, info: ValidationInfo) -> P
 
 
 def _potential_model(kind: str, pot: Potential) -> type[PotentialSpec]:
-    return create_model(  # type: ignore[call-overload]
+    return create_model(  # type: ignore[call-overload]  # the fields are the catalog's, as **kwargs
         f"{_camel(kind)}{_camel(pot.kind)}Potential",
         __base__=PotentialSpec,
         __doc__=pot.formula,
@@ -331,28 +365,36 @@ def _potential_model(kind: str, pot: Potential) -> type[PotentialSpec]:
 def _system_model(kind: str) -> type[SystemSpec]:
     module = SYSTEMS[kind]
     allowed = [_potential_model(kind, pot) for pot in module.POTENTIALS.values()] + [_expression_model(kind)]
-    potential_union = Annotated[Union[tuple(allowed)], Field(discriminator="kind")]  # type: ignore[valid-type]  # noqa: UP007
+    potential_union = Annotated[Union[tuple(allowed)],  # type: ignore[valid-type]  # built at import  # noqa: UP007
+                                Field(discriminator="kind")]
     default, default_kind = allowed[0], next(iter(module.POTENTIALS))
+
+    def default_potential() -> PotentialSpec:
+        return default(kind=default_kind)  # type: ignore[call-arg]  # kind: create_model's field
+
     extra: dict[str, Any] = {}
     if kind in SURFACE_KINDS:
         extra["surface"] = (SurfaceSpec, Field(description="the surface Phi(x) = 0 on which the centre moves"))
-    return create_model(  # type: ignore[call-overload]
+    return create_model(  # type: ignore[call-overload]  # the fields are the catalog's, as **kwargs
         f"{_camel(kind)}Spec",
         __base__=SystemSpec,
         __doc__=module.TITLE,
-        __validators__=({"names_apart": field_validator("potential")(classmethod(_names_apart))}  # type: ignore[arg-type]
+        __validators__=({"names_apart": field_validator("potential")(classmethod(_names_apart))}
                         if kind in SURFACE_KINDS else None),
         kind=(Literal[kind], ...),
         **{par.name: _parameter_field(par) for par in module.PARAMETERS},
         **extra,
-        potential=(potential_union, Field(default_factory=lambda: default(kind=default_kind),
+        potential=(potential_union, Field(default_factory=default_potential,
                                           description=f"one of: {', '.join(module.POTENTIALS)}, {EXPRESSION} "
                                                       f"(default {list(module.POTENTIALS)[0]})")),
     )
 
 
 SYSTEM_MODELS: dict[str, type[SystemSpec]] = {kind: _system_model(kind) for kind in SYSTEMS}
-AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discriminator="kind")]  # type: ignore[valid-type]  # noqa: UP007
+if TYPE_CHECKING:  # the union's members are built from the catalog at import: to a type checker, a SystemSpec
+    AnySystemSpec: TypeAlias = SystemSpec
+else:
+    AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discriminator="kind")]  # noqa: UP007
 
 
 def definition_of(system_json: Mapping[str, Any]) -> MechanicalSystem:
@@ -378,37 +420,50 @@ def _definition_of(system_text: str) -> MechanicalSystem:
 
 class GeneralizedChaplyginSpec(SystemSpec):
     """A generalized Chaplygin system with two degrees of freedom (eq. 2704-7), as in POST /v1/hamiltonize:
-    L(q, qdot), S = a1(q) q1dot + a2(q) q2dot + b(q), an optional U(q), every constant a parameter with a
-    value. Integrated in t, and in tau with its Hamiltonian form when Theorem 1 gives a reducing multiplier."""
+    L(q, q_dot), S = a1(q) q1_dot + a2(q) q2_dot + b(q), an optional U(q), every constant a parameter with a
+    value. Integrated in t, and in tau with its Hamiltonian form when Theorem 1 gives a reducing multiplier.
+    ``lagrangian`` is the old name of ``L`` (still read, with a note in the answer: :mod:`schemas.deprecations`)."""
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [GENERALIZED_CHAPLYGIN_EXAMPLE]})
+    renamed_state: ClassVar[dict[str, str]] = RENAMED_STATE
 
     kind: Literal["generalized_chaplygin"]
     coordinates: list[Annotated[str, Field(min_length=1, max_length=32)]] = Field(
         min_length=2, max_length=2, description="names of q1, q2 (the state vector q of the initial state)")
     velocities: list[Annotated[str, Field(min_length=1, max_length=32)]] = Field(
-        min_length=2, max_length=2, description="names of q1dot, q2dot (the state vector qdot)")
+        min_length=2, max_length=2, description="names of the velocities q1_dot, q2_dot (the state vector q_dot)")
     parameters: dict[str, ParameterFloat] = Field(
         default_factory=dict, max_length=MAX_EXPRESSION_PARAMETERS,
         description="every constant of the expressions, by name, with its value")
-    lagrangian: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
-                            description="L(q, qdot), a polynomial of degree 2 in the velocities (Theorem 1)")
+    L: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
+                   description="L(q, q_dot), a polynomial of degree 2 in the velocities (Theorem 1); formerly "
+                               "`lagrangian` (still read, deprecated)")
     a1: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH,
-                    description="S = a1(q) q1dot + a2(q) q2dot + b(q) (eq. 2704-7)")
+                    description="S = a1(q) q1_dot + a2(q) q2_dot + b(q) (eq. 2704-7)")
     a2: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH)
     b: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH)
     potential: str | None = Field(None, max_length=MAX_EXPRESSION_LENGTH,
                                   description="U(q), subtracted from L (null: none, or already in L)")
 
+    @model_validator(mode="wrap")
+    @classmethod
+    def _old_names(cls, data: Any, handler: ModelWrapValidatorHandler[GeneralizedChaplyginSpec]) -> Any:
+        data, notes = renamed(data, RENAMED_FIELDS, "system.")
+        spec = handler(data)
+        spec._deprecations = notes
+        return spec
+
     @field_validator("coordinates", "velocities", "parameters")
     @classmethod
     def _names(cls, value: Any, info: ValidationInfo) -> Any:
+        field = info.field_name
+        assert field is not None  # a field validator's info names its field
         order = ("coordinates", "velocities", "parameters")
-        names = {k: tuple(info.data.get(k, ())) for k in order[:order.index(info.field_name)]}
-        names[info.field_name] = tuple(value)
-        return core_names_checked(value, info.field_name, lambda: gc.declared(*(names.get(k, ()) for k in order)))
+        names = {k: tuple(info.data.get(k, ())) for k in order[:order.index(field)]}
+        names[field] = tuple(value)
+        return core_names_checked(value, field, lambda: gc.declared(*(names.get(k, ()) for k in order)))
 
-    @field_validator("lagrangian", "a1", "a2", "b", "potential")
+    @field_validator("L", "a1", "a2", "b", "potential")
     @classmethod
     def _parsed(cls, text: str | None, info: ValidationInfo) -> str | None:
         if text is None or any(k not in info.data for k in ("coordinates", "velocities", "parameters")):
@@ -421,7 +476,7 @@ class GeneralizedChaplyginSpec(SystemSpec):
 
     def data(self) -> gc.ChaplyginData:
         """The core's parsed system."""
-        return gc.chaplygin_data(self.lagrangian, tuple(self.coordinates), tuple(self.velocities), self.a1, self.a2,
+        return gc.chaplygin_data(self.L, tuple(self.coordinates), tuple(self.velocities), self.a1, self.a2,
                                  self.b, self.potential, tuple(self.parameters))
 
     def definition(self) -> MechanicalSystem:
@@ -478,11 +533,13 @@ class LagrangianSpec(SystemSpec):
     @field_validator("coordinates", "parameters")
     @classmethod
     def _names(cls, value: Any, info: ValidationInfo) -> Any:
-        if info.field_name == "parameters" and "coordinates" not in info.data:
+        field = info.field_name
+        assert field is not None  # a field validator's info names its field
+        if field == "parameters" and "coordinates" not in info.data:
             return value  # the coordinates are refused already
-        coordinates = tuple(value if info.field_name == "coordinates" else info.data["coordinates"])
-        parameters = tuple(value) if info.field_name == "parameters" else ()
-        return core_names_checked(value, info.field_name, lambda: lagrangian.declared(coordinates, parameters))
+        coordinates = tuple(value if field == "coordinates" else info.data["coordinates"])
+        parameters = tuple(value) if field == "parameters" else ()
+        return core_names_checked(value, field, lambda: lagrangian.declared(coordinates, parameters))
 
     @field_validator("L", "constraints")
     @classmethod
@@ -549,5 +606,8 @@ class LagrangianSpec(SystemSpec):
 
 #: What POST /v1/jobs takes as ``system``: every kind of the catalog, a generalized Chaplygin system and a
 #: Lagrangian system of one's own.
-JobSystemSpec = Annotated[Union[(*SYSTEM_MODELS.values(), GeneralizedChaplyginSpec,  # type: ignore[valid-type]
-                                 LagrangianSpec)], Field(discriminator="kind")]
+if TYPE_CHECKING:  # the union's members are built from the catalog at import: to a type checker, a SystemSpec
+    JobSystemSpec: TypeAlias = SystemSpec
+else:
+    JobSystemSpec = Annotated[Union[(*SYSTEM_MODELS.values(), GeneralizedChaplyginSpec,  # noqa: UP007
+                                     LagrangianSpec)], Field(discriminator="kind")]

@@ -3,11 +3,12 @@
 127.0.0.1:6379 (starting ``redis-server``, installing Debian's package if it is missing), that
 PostgreSQL answers on 127.0.0.1:5432 (starting a cluster of the tests' own if not) and that a
 headless Chromium is there for the page tests (installing Debian's ``chromium`` if it is missing)
-and nginx for the slow-client tests (Debian's ``nginx-light``),
-then run the whole test suite in parallel (pytest-xdist: ``NONHOLONOMIC_TEST_WORKERS`` processes, default
-3, each taking whole files so that a module's server is started once). Extra arguments go to pytest
-(e.g. ``-k measure``; ``-n 0`` runs in one process). Screenshots and other artefacts of the run go to
-``test-output/``."""
+and nginx for the slow-client tests (Debian's ``nginx-light``); check the code with ruff and mypy
+(as configured in pyproject.toml; mypy runs beside the tests, and a finding fails the command as a
+failed test does); then run the whole test suite in parallel (pytest-xdist: ``NONHOLONOMIC_TEST_WORKERS``
+processes, default 3, each taking whole files so that a module's server is started once). Extra arguments
+go to pytest (e.g. ``-k measure``; ``-n 0`` runs in one process). Screenshots and other artefacts of the
+run go to ``test-output/``."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -119,6 +121,8 @@ def ensure_nginx() -> dict[str, str]:
 
 def main(argv: list[str]) -> int:
     ensure_installed("test")
+    lint = subprocess.run([str(PYTHON), "-m", "ruff", "check", "--quiet", "."], cwd=ROOT).returncode
+    typing = TypeCheck()  # beside the service starts and the tests: about 20 s of one core when cold
     ensure_redis()
     ensure_postgres()
     env = {**os.environ, **ensure_nginx(), "NONHOLONOMIC_CHROMIUM": ensure_chromium(),
@@ -126,7 +130,28 @@ def main(argv: list[str]) -> int:
            "NONHOLONOMIC_TEST_OUTPUT": os.environ.get("NONHOLONOMIC_TEST_OUTPUT", str(ROOT / "test-output"))}
     os.chdir(ROOT)
     compile_once(env)
-    return subprocess.run([str(PYTHON), "-m", "pytest", *parallel(argv), *argv], env=env).returncode
+    tests = subprocess.run([str(PYTHON), "-m", "pytest", *parallel(argv), *argv], env=env).returncode
+    checked = typing.result()
+    say(f"ruff: {'clean' if lint == 0 else 'findings above'}; mypy: {'clean' if checked == 0 else 'findings above'}")
+    return tests or lint or checked
+
+
+class TypeCheck:
+    """mypy over the configured packages (``[tool.mypy]``) in a process of its own; its output is shown
+    when the tests are done (a finding fails the command, as a failed test does)."""
+
+    def __init__(self) -> None:
+        self._out = tempfile.TemporaryFile(mode="w+")
+        self._process = subprocess.Popen([str(PYTHON), "-m", "mypy"], cwd=ROOT, stdout=self._out,
+                                         stderr=subprocess.STDOUT)
+
+    def result(self) -> int:
+        code = self._process.wait()
+        if code != 0:
+            self._out.seek(0)
+            print(self._out.read(), flush=True)
+        self._out.close()
+        return code
 
 
 def compile_once(env: dict[str, str]) -> None:

@@ -126,8 +126,9 @@ def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
             parts.setdefault(name, []).append(point_array(values, section["count"], widths[name]))
     arrays = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
     buffer = io.BytesIO()
-    np.savez(buffer, **arrays, request_json=np.array(json.dumps(record["request"])),
-             units_json=np.array(json.dumps(request_units(record["request"]))))
+    texts = {"request_json": np.array(json.dumps(record["request"])),
+             "units_json": np.array(json.dumps(request_units(record["request"])))}
+    np.savez(buffer, **arrays, **texts)  # type: ignore[arg-type]  # numpy's stub: a **name may bind allow_pickle
     return buffer.getvalue()
 
 

@@ -115,7 +115,8 @@ def section_csv(section: dict[str, Any], units: Mapping[str, str],
 
 def _npz(arrays: dict[str, np.ndarray], **texts: Any) -> bytes:
     buffer = io.BytesIO()
-    np.savez(buffer, **arrays, **{f"{name}_json": np.array(json.dumps(value)) for name, value in texts.items()})
+    texts_json = {f"{name}_json": np.array(json.dumps(value)) for name, value in texts.items()}
+    np.savez(buffer, **arrays, **texts_json)  # type: ignore[arg-type]  # numpy's stub: a **name may bind allow_pickle
     return buffer.getvalue()
 
 

@@ -92,12 +92,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                            expose_headers=["Location", "Retry-After", "Link", "Idempotent-Replayed"])
     app.include_router(health.router)
     # every /v1 route: the caller's key (when keys are configured) and its rate
-    keyed = {"dependencies": [Depends(caller)],
-             "responses": problem_responses({401: "API keys are on and none, or an unknown one, was sent",
-                                             429: "the key's rate limit; `Retry-After` says when to retry"})}
+    dependencies = [Depends(caller)]
+    responses = problem_responses({401: "API keys are on and none, or an unknown one, was sent",
+                                   429: "the key's rate limit; `Retry-After` says when to retry"})
     for router in (systems.router, jobs.router, ensembles.router, symbolic.router, maps.router, report.router,
                    pages.router, explore.router):
-        app.include_router(router, **keyed)  # type: ignore[arg-type]
+        app.include_router(router, dependencies=dependencies, responses=responses)
     app.mount(STATIC_URL, StaticFiles(packages=[("service", "static")]), name="static")
     _redoc(app)
     _secure(app)
@@ -133,7 +133,7 @@ def _secure(app: FastAPI) -> None:
     wraps the whole stack, outside Starlette's ServerErrorMiddleware (``add_middleware`` would sit inside it)."""
     docs = frozenset(p for p in (DOCS_URL, REDOC_URL, app.swagger_ui_oauth2_redirect_url) if p)
     build = app.build_middleware_stack
-    app.build_middleware_stack = lambda: SecurityHeaders(build(), docs)  # type: ignore[method-assign]
+    app.build_middleware_stack = lambda: SecurityHeaders(build(), docs)  # type: ignore[method-assign]  # wrap the stack
 
 
 app = create_app()

@@ -34,7 +34,7 @@ ENSEMBLE_PLOT_CAPTIONS = {
            "failed); the colour bar marks the threshold above which a cell is chaotic",
 }
 #: How to cite, on every page; the same data as ``CITATION.cff`` at the repository's root (a test compares them).
-CITATION = {
+CITATION: dict[str, dict[str, Any]] = {
     "software": {"title": "nonholonomic: a computation service for nonholonomic mechanics with machine-checked "
                           "evidence",
                  "authors": "The nonholonomic developers", "version": nonholonomic.__version__, "license": "MIT"},

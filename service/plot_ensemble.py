@@ -40,7 +40,9 @@ def _ensemble_system(view: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str,
 def _ensemble_poincare_figure(view: Mapping[str, Any], members: Iterable[Mapping[str, Any]]) -> Figure:
     """Every member's section points, one colour per member (a colormap over the member index)."""
     info, units = _ensemble_system(view)
-    chunks, indices, names, section = [], [], None, None
+    chunks: list[np.ndarray] = []
+    indices: list[np.ndarray] = []
+    names, section = None, None
     for member in members:
         block = member.get("poincare")
         if not block:
@@ -121,7 +123,8 @@ def _ensemble_exponents_figure(view: Mapping[str, Any], members: Iterable[Mappin
         what = f"largest Lyapunov exponent against {path} ({len(y)} members): finite-time estimates at {when}"
     else:
         bins = np.histogram_bin_edges(y, bins=int(np.clip(np.sqrt(len(y)) * 2, 5, 60)))
-        ax.hist([y[~bad], y[bad]], bins=bins, stacked=True, color=["C0", "C3"], alpha=0.85,
+        ax.hist([y[~bad], y[bad]], bins=bins,  # type: ignore[arg-type]  # matplotlib's stub: no array (it takes one)
+                stacked=True, color=["C0", "C3"], alpha=0.85,
                 label=[f"converged ({int((~bad).sum())})", f"not converged ({int(bad.sum())})"])
         ax.axvline(0.0, color="0.5", linewidth=0.8)
         low, high = min(float(bins[0]), 0.0), max(float(bins[-1]), 0.0)  # zero in sight: how far from it

@@ -214,8 +214,8 @@ class _Rerun:
         from schemas.jobs import JobRequest
 
         job = JobRequest.model_validate(request)
-        self.system = job.system.definition()  # type: ignore[attr-defined]
-        p = parameter_vector(self.system, dict(job.system.parameter_values()))  # type: ignore[attr-defined]
+        self.system = job.system.definition()
+        p = parameter_vector(self.system, dict(job.system.parameter_values()))
         state = {v.name: result["initial_state"][v.name] for v in self.system.state}
         self.p, self.y0 = p, state_vector(self.system, state, p)
         self.engine, self.tolerance = job.integrator.engine, job.integrator.tolerance

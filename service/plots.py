@@ -33,10 +33,10 @@ import re
 import textwrap
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
-import mpl_toolkits.mplot3d  # noqa: F401  (registers the "3d" projection)
+import mpl_toolkits.mplot3d  # type: ignore[import-untyped]  # no py.typed  # noqa: F401  (the "3d" projection)
 import numpy as np
 import sympy as sp
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -46,6 +46,9 @@ from matplotlib.ticker import MaxNLocator
 from nonholonomic.definition import MechanicalSystem, StateConstraint, StateVector
 from nonholonomic.potentials import EXPRESSION
 from nonholonomic.systems import SURFACE_KINDS, get_system
+
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
 
 JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit")
 ENSEMBLE_PLOTS: tuple[str, ...] = ("poincare", "exponents", "map")
@@ -61,7 +64,7 @@ MAX_SECTION_POINTS = 200_000
 DRIFT_FLOOR = 1e-17
 
 #: Style of every plot; SVG text stays text (searchable, selectable), SVG ids are reproducible.
-_STYLE = {
+_STYLE: dict[RcKeyType, Any] = {
     "svg.fonttype": "none",
     "svg.hashsalt": "nonholonomic",
     "font.size": 9.0,
@@ -364,7 +367,7 @@ def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | N
     keep = _thin(len(t), MAX_POINTS)
 
     fig = _new_figure(11.0, 4.8)
-    fig.nonholonomic_transient = orbit.cut_short  # type: ignore[attr-defined]  (job_plot: not to be cached)
+    fig.nonholonomic_transient = orbit.cut_short  # type: ignore[attr-defined]  # job_plot's flag: not to be cached
     if g.shape[1] == 2:  # generalized coordinates (q1, q2): the orbit in the plane
         _plane_orbit(fig.add_subplot(1, 2, 1), g, keep, t, geometric, units)
     else:
@@ -397,13 +400,13 @@ def _integrals_figure(result: Mapping[str, Any], request: Mapping[str, Any]) -> 
         job = JobRequest.model_validate(request)
     except ValueError as exc:
         raise PlotUnavailable(f"the job's request does not rebuild a system: {exc}") from None
-    system = job.system.validation_definition()  # type: ignore[attr-defined]
+    system = job.system.validation_definition()
     if not system.integrals:
         raise PlotUnavailable(f"{system.kind} claims no first integral")
     trajectory = result["trajectory"]
     t = np.asarray(trajectory["t"], dtype=float)
     states = np.hstack([_vector_samples(trajectory, v.name) for v in system.state])
-    series = integral_series(system, job.system.parameter_values(), states)  # type: ignore[attr-defined]
+    series = integral_series(system, job.system.parameter_values(), states)
     reported = {item["name"]: item for item in result.get("integrals") or []}
     tolerance = (next(iter(reported.values()))["tolerance"] if reported
                  else integral_tolerance(result["integration"]["tolerance"]))
@@ -464,7 +467,8 @@ def _poincare_figure(result: Mapping[str, Any], request: Mapping[str, Any] | Non
     orbit = result.get("periodic_orbit") or {}
     if (orbit.get("status") in ("found", "degenerate") and orbit.get("coordinate_names") == list(names)
             and orbit.get("surface") == section["surface"] and orbit.get("value") == section["value"]):
-        ax.scatter(*orbit["coordinates"], marker="*", s=160, color="C3", edgecolors="k", linewidths=0.5, zorder=3,
+        u, v = orbit["coordinates"]
+        ax.scatter(u, v, marker="*", s=160, color="C3", edgecolors="k", linewidths=0.5, zorder=3,
                    label=f"the periodic orbit (period {orbit['period']}, {orbit.get('stability')})")
         ax.legend(loc="best", fontsize=8)
     ax.set_xlabel(_axis_label(names[0], units))

@@ -77,7 +77,10 @@ def past_safety_cap(cap_s: float, fields: Sequence[str]) -> ProblemError:
 def _check(kind: str, body: JobRequest | EnsembleRequest, step: Step = no_step) -> tuple[Problems, Chunks]:
     """The request's problems (``(field, reason)``) and, for a valid ensemble, its chunks."""
     found = [(p.field, p.reason) for p in body.problems(step)]
-    chunks = body.chunks() if kind == "ensemble" and not found else None  # type: ignore[union-attr]
+    chunks = None
+    if kind == "ensemble" and not found:
+        assert isinstance(body, EnsembleRequest)  # the model of kind "ensemble"
+        chunks = body.chunks()
     return found, chunks
 
 

@@ -178,4 +178,4 @@ class EnsembleStore:
                                           or_(EnsembleRow.broker_epoch.is_(None),
                                               EnsembleRow.broker_epoch != broker_epoch))
                                    .order_by(EnsembleRow.created).limit(limit))
-            return [tuple(row) for row in rows]  # type: ignore[misc]
+            return [(ensemble_id, queue, epoch) for ensemble_id, queue, epoch in rows]

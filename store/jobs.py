@@ -13,10 +13,10 @@ import zlib
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
-from sqlalchemy import Engine, and_, create_engine, delete, event, func, insert, or_, select, text, update
-from sqlalchemy.engine import make_url
+from sqlalchemy import Engine, Table, and_, create_engine, delete, event, func, insert, or_, select, text, update
+from sqlalchemy.engine import CursorResult, make_url
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -26,7 +26,7 @@ from store.statements import autocommit, changed_one
 
 log = logging.getLogger(__name__)
 
-_JOBS = JobRow.__table__
+_JOBS = cast(Table, JobRow.__table__)  # declared with __tablename__: a Table (typed FromClause)
 #: Statuses of a job that has not ended.
 ACTIVE = ("queued", "running")
 #: Statuses of a job that ended.
@@ -270,7 +270,7 @@ class JobStore:
                                    .where(JobRow.status == "queued",
                                           or_(JobRow.broker_epoch.is_(None), JobRow.broker_epoch != broker_epoch))
                                    .order_by(JobRow.created).limit(limit))
-            return [tuple(row) for row in rows]  # type: ignore[misc]
+            return [tuple(row) for row in rows]
 
     def running_on(self) -> dict[str, list[str]]:
         """Running jobs by the worker running them."""
@@ -284,8 +284,9 @@ class JobStore:
         """Delete ended jobs created more than ``ttl_s`` ago; returns how many."""
         horizon = _now().timestamp() - self.ttl_s
         with self._session.begin() as session:
-            done = session.execute(delete(JobRow).where(JobRow.created < horizon, JobRow.status.in_(ENDED)))
-            return int(done.rowcount)  # type: ignore[attr-defined]
+            done = cast("CursorResult[Any]",  # a DELETE's result (typed Result): it has the rowcount
+                        session.execute(delete(JobRow).where(JobRow.created < horizon, JobRow.status.in_(ENDED))))
+            return int(done.rowcount)
 
     # -- reading ---------------------------------------------------------------------------------
 

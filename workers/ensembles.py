@@ -93,7 +93,7 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
             poincare=request.poincare.options() if request.poincare else None,
             lyapunov=request.lyapunov.options() if request.lyapunov else None,
             tolerance=request.integrator.tolerance,
-            parameter_groups=request.system.parameter_values(),  # type: ignore[attr-defined]
+            parameter_groups=request.system.parameter_values(),
             progress=progress)
     except IntegrationCancelled:
         return "stopped" if stopping() else "cancelled"

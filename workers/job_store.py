@@ -14,7 +14,7 @@ import time
 import uuid
 from collections.abc import Callable
 from functools import lru_cache
-from typing import Any
+from typing import Any, cast
 
 import redis
 from sqlalchemy.exc import OperationalError
@@ -64,7 +64,7 @@ def write_until_stored(write: Callable[[], Any], limit_s: float = STORE_RETRY_S)
 def broker_epoch(client: redis.Redis) -> str:
     """The broker's current epoch (created if Redis has none), in one round trip (``SET NX GET``)."""
     fresh = uuid.uuid4().hex
-    old = client.set(EPOCH_KEY, fresh, nx=True, get=True)
+    old = cast("bytes | None", client.set(EPOCH_KEY, fresh, nx=True, get=True))  # GET: the old value, undecoded
     return old.decode() if old is not None else fresh
 
 

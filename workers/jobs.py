@@ -103,6 +103,7 @@ def run_report(request: dict[str, Any], progress: ProgressCallback | None = None
     key = memo.key_of("paper-report", (tuple(job.claims) if job.claims is not None else None, response_fingerprint()))
     found, report = memo.recall(key) if key is not None else (False, None)
     if found:
+        assert report is not None  # found: the remembered report
         if progress is not None:
             progress(1.0)
         return {**report, "computed": {**report["computed"], "cached": True}}

@@ -18,7 +18,7 @@ from __future__ import annotations
 import io
 from collections.abc import Iterator, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 import numpy as np
 
@@ -164,7 +164,8 @@ class Client(SymbolicRoutes):
             first = summary(job_id)
             t_final = (first.get("request") or {}).get("t_final")
             simulated = isinstance(t_final, int | float)  # a report job has no t_final: a bare bar
-            with TqdmProgress(t_final if simulated else 1.0, "s" if simulated else None, label=job_id[:8]) as bar:
+            total = cast(float, t_final) if simulated else 1.0
+            with TqdmProgress(total, "s" if simulated else None, label=job_id[:8]) as bar:
                 view = self._wait("job", summary, job_id, timeout, poll, bar)
         else:
             view = self._wait("job", summary, job_id, timeout, poll, progress or None)
@@ -479,7 +480,7 @@ class Client(SymbolicRoutes):
             raise ValueError(f"format must be one of xarray, json, csv, netcdf, not {format!r}")
         data = self._request("GET", path, params={"format": "json"}).json()
         if format == "json":
-            return data  # type: ignore[no-any-return]
+            return data
         return frames.map_dataset(data, self.ensemble(ensemble_id))
 
     def exponents(self, ident: str, format: Literal["json", "pandas"] = "pandas", *,  # noqa: A002

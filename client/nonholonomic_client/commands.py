@@ -122,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
             Path(args.result).write_text(json.dumps(view["result"], indent=1) + "\n", encoding="utf-8")
             print(f"result written to {args.result}")
         if args.out:
-            path = api.trajectory(job_id, fmt, out=args.out)  # type: ignore[arg-type]
+            path = api.trajectory(job_id, fmt, out=args.out)  # type: ignore[arg-type]  # fmt: a suffix allowed
+            assert isinstance(path, Path)  # with out: the file written
             print(f"trajectory written to {path}")
     return 0
 
@@ -147,9 +148,11 @@ def ensemble(args: argparse.Namespace) -> int:
         print(ensemble_summary(view))
         if args.out and chaos_map:
             path = api.chaos_map(ensemble_id, "netcdf" if fmt == "nc" else "csv", out=args.out)
+            assert isinstance(path, Path)  # with out: the file written
             print(f"map written to {path}")
         elif args.out:
-            path = api.section(ensemble_id, fmt, out=args.out)  # type: ignore[arg-type]
+            path = api.section(ensemble_id, fmt, out=args.out)  # type: ignore[arg-type]  # fmt: a suffix allowed
+            assert isinstance(path, Path)  # with out: the file written
             print(f"section written to {path}")
     summary = view.get("summary") or {}
     return 1 if summary.get("members") and not summary.get("succeeded") else 0

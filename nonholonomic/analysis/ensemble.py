@@ -156,8 +156,8 @@ def run_chunk(system: MechanicalSystem, members: Sequence[Member], t_final: floa
     integrated = [i for i, t in enumerate(trajectories) if not isinstance(t, Exception)]
     drifts: dict[int, list[Any]] = {}
     if "integrals" in checks and integrated:
-        drifts = dict(zip(integrated, integral_evidence_batch(system, P[integrated],
-                                                              [trajectories[i] for i in integrated])))
+        completed = [t for t in trajectories if not isinstance(t, Exception)]  # in the order of ``integrated``
+        drifts = dict(zip(integrated, integral_evidence_batch(system, P[integrated], completed)))
     out = []
     for i, (member, trajectory, section, spectrum) in enumerate(zip(members, trajectories, sections, spectra)):
         failure = next((x for x in (trajectory, section, spectrum) if isinstance(x, Exception)), None)
@@ -165,6 +165,7 @@ def run_chunk(system: MechanicalSystem, members: Sequence[Member], t_final: floa
             out.append(MemberResult(member.index, member.label, member.parameters, member.initial_state,
                                     error=f"{type(failure).__name__}: {failure}"))
             continue
+        assert not isinstance(trajectory, Exception)  # a failed member was reported above
         derived, integrals, found = evidence(system, member.parameters, trajectory, checks, drifts.get(i, []))
         warnings = parameter_warnings(system, _groups(system, member.parameters, parameter_groups))
         result = SimulationResult(system, member.parameters, trajectory, derived, integrals, found, warnings,

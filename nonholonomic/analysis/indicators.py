@@ -211,7 +211,7 @@ def _drifts(system: MechanicalSystem, P: np.ndarray, states: np.ndarray) -> list
     kern = numeric(system)
     points, n, lanes = states.shape
     shared = bool(np.all(P == P[0]))  # a map's cells share their parameters: one kernel call for all lanes
-    out = []
+    out: list[dict[str, float]] = []
     groups = [range(lanes)] if shared else [[j] for j in range(lanes)]
     for group in groups:
         X = states[:, :, list(group)].transpose(2, 0, 1).reshape(-1, n)

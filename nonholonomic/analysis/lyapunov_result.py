@@ -158,13 +158,16 @@ def _finish(system: MechanicalSystem, p: np.ndarray, acc: _Accumulator, end_stat
     divergence_average = acc.divergence / span
     scale = max(1.0, float(np.sum(np.abs(values))))
 
+    start_state = acc.state_start
+    assert start_state is not None  # recorded where the averaged phase starts (the transient is < t_final)
     measure = system.measure
     with np.errstate(all="ignore"):
         rho = (np.full(2, np.nan) if measure.density is None else
-               numeric(system).density(np.vstack([acc.state_start, end_state]), p)[:, 0])
+               numeric(system).density(np.vstack([start_state, end_state]), p)[:, 0])
     if np.all(np.isfinite(rho)) and np.all(rho > 0):
-        measure_average: float | None = float(-(math.log(rho[1]) - math.log(rho[0])) / span)
-        consistent: bool | None = abs(total - measure_average) <= MEASURE_TOLERANCE * scale
+        average = float(-(math.log(rho[1]) - math.log(rho[0])) / span)
+        measure_average: float | None = average
+        consistent: bool | None = abs(total - average) <= MEASURE_TOLERANCE * scale
     else:
         measure_average, consistent = None, None
     if measure.density is None:  # nothing claimed: the sum is what the orbit gives, not a prediction
@@ -194,7 +197,7 @@ def _finish(system: MechanicalSystem, p: np.ndarray, acc: _Accumulator, end_stat
         warnings.append(f"the sum of the exponents {total:.12g} differs from the quadrature of div f "
                         f"{divergence_average:.12g}: the variational integration is inaccurate")
 
-    zeros = expected_zeros(system, p, np.vstack([acc.state_start, end_state]), consistent)
+    zeros = expected_zeros(system, p, np.vstack([start_state, end_state]), consistent)
     zero_count = sum(z.counted for z in zeros)
     zero_indices = np.sort(np.argsort(np.abs(values), kind="stable")[:zero_count])
     if not next(z for z in zeros if z.reason == "time direction").counted:

@@ -17,7 +17,7 @@ import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from functools import lru_cache
-from typing import TypeVar
+from typing import TypeVar, cast
 
 import heyoka as hy
 import numpy as np
@@ -93,7 +93,7 @@ def thread_copy(key: tuple[object, ...], template: Callable[[], T]) -> T:
         while len(cache) > THREAD_COPIES:
             cache.popitem(last=False)
     cache.move_to_end(key)
-    return cache[key]  # type: ignore[return-value]
+    return cast(T, cache[key])  # what template() gave under this key
 
 
 def _integrator(system: MechanicalSystem, tolerance: float, lanes: int = 0) -> hy.taylor_adaptive:

@@ -127,7 +127,8 @@ def expected_zeros(system: MechanicalSystem, parameters: np.ndarray, states: np.
     basis: list[np.ndarray] = [np.empty((0, n)) for _ in X]
 
     def try_add(row_index: int) -> tuple[bool, str]:
-        rows = grads[:, row_index, :]  # type: ignore[index]
+        assert grads is not None  # a row index exists only when there are integrals or constraints
+        rows = grads[:, row_index, :]
         if not np.all(np.isfinite(rows)):
             return False, "its gradient is not finite at the orbit"
         gained = False

@@ -7,7 +7,7 @@ orbit, ``run_batch`` on the members of an ensemble chunk.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NotRequired, TypedDict
 
 import numpy as np
 
@@ -17,6 +17,15 @@ from nonholonomic.integration import IntegrationError, ProgressCallback
 if TYPE_CHECKING:
     from nonholonomic.analysis.lyapunov import Spectrum
     from nonholonomic.analysis.poincare import Section
+
+
+class _SectionKeywords(TypedDict):
+    """The keyword arguments :class:`SectionOptions` passes to :func:`~.poincare.section` (and the batch)."""
+
+    value: float
+    direction: str
+    max_points: int
+    coordinates: NotRequired[tuple[str, ...]]
 
 
 @dataclass(frozen=True)
@@ -29,9 +38,9 @@ class SectionOptions:
     coordinates: tuple[str, str] | None = None
     max_points: int = 10_000
 
-    def _keywords(self) -> dict[str, object]:
-        keywords: dict[str, object] = {"value": self.value, "direction": self.direction,
-                                       "max_points": self.max_points}
+    def _keywords(self) -> _SectionKeywords:
+        keywords: _SectionKeywords = {"value": self.value, "direction": self.direction,
+                                      "max_points": self.max_points}
         if self.coordinates is not None:
             keywords["coordinates"] = tuple(self.coordinates)
         return keywords
@@ -41,7 +50,7 @@ class SectionOptions:
         from nonholonomic.analysis.poincare import section
 
         return section(system, p, y0, t_final, self.surface, tolerance=tolerance, progress=progress,
-                       **self._keywords())  # type: ignore[arg-type]
+                       **self._keywords())
 
     def run_batch(self, system: MechanicalSystem, P: np.ndarray, Y0: np.ndarray, t_final: float, *,
                   tolerance: float | None = None,
@@ -49,7 +58,7 @@ class SectionOptions:
         from nonholonomic.analysis.poincare import section_batch
 
         return section_batch(system, P, Y0, t_final, self.surface, tolerance=tolerance, progress=progress,
-                             **self._keywords())  # type: ignore[arg-type]
+                             **self._keywords())
 
 
 @dataclass(frozen=True)
@@ -79,7 +88,7 @@ class SpectrumOptions:
         out: list[Spectrum | IntegrationError] = []
         for i, (p, y0) in enumerate(zip(P, Y0)):
             member_progress = None if progress is None else (
-                lambda f, i=i: progress((i + f) / len(P)))  # type: ignore[misc]
+                lambda f, i=i: progress((i + f) / len(P)))
             try:
                 out.append(spectrum(system, p, y0, t_final, count=self.count, interval=self.interval,
                                     transient=self.transient, tolerance=tolerance, progress=member_progress))

@@ -67,7 +67,7 @@ def continue_orbit(system: MechanicalSystem, start: PeriodicOrbit, parameter: st
     events: list[BranchEvent] = []
     previous, previous_value = start, None
     for i, (value, p) in enumerate(zip(values, parameter_vectors)):
-        part = None if progress is None else (lambda f, i=i: progress((i + f) / len(values)))  # type: ignore[misc]
+        part = None if progress is None else (lambda f, i=i: progress((i + f) / len(values)))
         try:
             orbit = refine(system, np.asarray(p, dtype=float), previous.initial_state, previous.period_t,
                            previous.surface, value=previous.value, direction=previous.direction,

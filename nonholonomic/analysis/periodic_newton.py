@@ -267,6 +267,9 @@ def solve(closing: Closing, z0: np.ndarray) -> Search:
 def level_values(p: np.ndarray, x: np.ndarray, surface_value: float, level: Sequence[str], r: Rows) -> np.ndarray:
     """The rows' targets at a seed ``x``: the section's value, the seed's integrals, the constraints' values."""
     values = r.values(x[None, :], p)[0]
-    targets = np.array([surface_value] + [float(v) for v in values[1: 1 + len(level)]]
-                       + [float(t) for t in r.targets_fixed[1 + len(level):]])  # type: ignore[arg-type]
+    fixed: list[float] = []
+    for t in r.targets_fixed[1 + len(level):]:
+        assert t is not None  # the constraints' values (only the surface's and the level's come from the seed)
+        fixed.append(float(t))
+    targets = np.array([surface_value] + [float(v) for v in values[1: 1 + len(level)]] + fixed)
     return targets

@@ -31,6 +31,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TypedDict
 
 import numpy as np
 
@@ -40,12 +41,13 @@ from nonholonomic.analysis.periodic_newton import (
     NEWTON_ITERATIONS,
     CancelCheck,
     Closing,
+    Flow,
     integral_gradients,
     level_values,
     rows,
     solve,
 )
-from nonholonomic.analysis.poincare import section
+from nonholonomic.analysis.poincare import Section, section
 from nonholonomic.analysis.poincare_request import _validate
 from nonholonomic.analysis.poincare_surface import SurfaceError
 from nonholonomic.analysis.sampling import fixable
@@ -165,9 +167,9 @@ def check_request(system: MechanicalSystem, surface: str, value: float, directio
     return chosen
 
 
-def crossing_states(system: MechanicalSystem, sec: object) -> np.ndarray:
+def crossing_states(system: MechanicalSystem, sec: Section) -> np.ndarray:
     """The state at each crossing of a :class:`~nonholonomic.analysis.poincare.Section`."""
-    return np.concatenate([sec.points[v.name] for v in system.state], axis=1)  # type: ignore[attr-defined]
+    return np.concatenate([sec.points[v.name] for v in system.state], axis=1)
 
 
 def find_periodic_orbit(
@@ -248,24 +250,35 @@ def refine(system: MechanicalSystem, p: np.ndarray, x0: np.ndarray, period_t: fl
     search = solve(closing, np.append(x0, period_t))
     n = system.dimension
     x, t = search.z[:n].copy(), float(search.z[n])
-    common = dict(iterations=tuple(search.history), method=search.method, wandered=search.wandered,
-                  evaluations=closing.evaluations, steps=closing.steps,
-                  search_time_s=time.perf_counter() - searching)
+    common = _SearchStats(iterations=tuple(search.history), method=search.method, wandered=search.wandered,
+                          evaluations=closing.evaluations, steps=closing.steps,
+                          search_time_s=time.perf_counter() - searching)
     if not search.residual <= CLOSING_TOLERANCE:
         why = f" ({search.wandered})" if search.wandered else ""
         return PeriodicOrbit(
             "not_found", f"Newton's method did not close the orbit{why}; the best closing error reached is "
                          f"{search.residual:.3g} (needed {CLOSING_TOLERANCE:g}): try another seed, period or level",
             surface, value, direction, period, level_map, x, t, residual=search.residual,
-            wall_time_s=time.perf_counter() - start, **common)  # type: ignore[arg-type]
+            wall_time_s=time.perf_counter() - start, **common)
     return _verified(system, p, x, t, closing, search.residual, surface, value, direction, period, chosen,
                      level_map, tolerance, coordinates, start, common)
+
+
+class _SearchStats(TypedDict):
+    """What the search reports into a :class:`PeriodicOrbit`, closed or not."""
+
+    iterations: tuple[float, ...]
+    method: str
+    wandered: str | None
+    evaluations: int
+    steps: int
+    search_time_s: float
 
 
 def _verified(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, t: float, closing: Closing, residual: float,
               surface: str, value: float, direction: str, period: int, chosen: tuple[str, ...],
               level_map: dict[str, float], tolerance: float, coordinates: Sequence[str] | None, start: float,
-              common: dict[str, object]) -> PeriodicOrbit:
+              common: _SearchStats) -> PeriodicOrbit:
     """The closed orbit's multipliers, family, crossings and independent closing error."""
     n = system.dimension
     _, J, fl = closing.evaluate(np.append(x, t))
@@ -308,7 +321,7 @@ def _verified(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, t: float, 
             warnings.append(f"the orbit's prime period is {j}: it is the period-{j} orbit traversed {period // j} "
                             "times")
             break
-    coordinates = tuple(float(c) for c in sec.coordinates[keep][-1]) if len(times) else ()
+    crossing_coordinates = tuple(float(c) for c in sec.coordinates[keep][-1]) if len(times) else ()
     # the closing error, independently
     period_tau = None
     if system.reduced_time is not None:
@@ -333,9 +346,9 @@ def _verified(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, t: float, 
                   f"{len(times)} time(s) in (0, T], not {period}: it is not a period-{period} orbit of this return map")
     return PeriodicOrbit(
         status, reason, surface, value, direction, period, level_map, x, t, period_tau,
-        tuple(sec.coordinate_names), coordinates, tuple(float(v) for v in times), mu, trivial, section_mu, trace,
-        stability, residual, independent, tuple(checks), singular_ratio=ratio, family_dimension=family,
-        wall_time_s=time.perf_counter() - start, warnings=tuple(warnings), **common)  # type: ignore[arg-type]
+        tuple(sec.coordinate_names), crossing_coordinates, tuple(float(v) for v in times), mu, trivial, section_mu,
+        trace, stability, residual, independent, tuple(checks), singular_ratio=ratio, family_dimension=family,
+        wall_time_s=time.perf_counter() - start, warnings=tuple(warnings), **common)
 
 
 def _stability(section_mu: np.ndarray, at_one: float) -> tuple[float | None, str | None]:
@@ -358,17 +371,17 @@ def _stability(section_mu: np.ndarray, at_one: float) -> tuple[float | None, str
     return trace, "unstable"
 
 
-def _product_check(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, fl: object, mu: np.ndarray,
+def _product_check(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, fl: Flow, mu: np.ndarray,
                    size: float) -> OrbitCheck:
     """det Φ(T) = Π μ against ρ(x₀)/ρ(x(T)) of the claimed measure (Liouville)."""
     product = float(np.prod(mu).real)
-    liouville = float(np.exp(fl.divergence_integral))  # type: ignore[attr-defined]
+    liouville = float(np.exp(fl.divergence_integral))
     tol = PRODUCT_TOLERANCE * size
     if system.measure.density is None:
         return OrbitCheck("multiplier_product", None, product, None, None,
                           f"no invariant measure is claimed: the product is exp(int div f dt) = {liouville:.15g}, "
                           "checked against no density")
-    rho = numeric(system).density(np.stack([x, fl.state]), p)[:, 0]  # type: ignore[attr-defined]
+    rho = numeric(system).density(np.stack([x, fl.state]), p)[:, 0]
     expected = float(rho[0] / rho[1])
     return OrbitCheck("multiplier_product", abs(product - expected) <= tol, product, expected, tol,
                       f"product of the monodromy's multipliers = rho(x0)/rho(x(T)) for the measure "
@@ -388,7 +401,8 @@ def _family_reason(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, null:
     """What the family of periodic orbits through x is: which unfixed integrals it keeps."""
     n = system.dimension
     others = [i for i in system.integrals if i.name not in chosen]
-    kept, moved = [], []
+    kept: list[str] = []
+    moved: list[str] = []
     if others:
         grads = integral_gradients(system)(x[None, :], p)[0].reshape(-1, n)
         names = [i.name for i in system.integrals]

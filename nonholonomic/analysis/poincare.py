@@ -57,7 +57,7 @@ from collections.abc import Sequence
 import heyoka as hy
 import numpy as np
 
-from nonholonomic.analysis.poincare_events import _BatchCrossings, _integrator
+from nonholonomic.analysis.poincare_events import _BatchCrossings, _Crossings, _integrator
 from nonholonomic.analysis.poincare_request import (
     DIRECTIONS,
     MAX_POINTS_LIMIT,
@@ -217,6 +217,7 @@ def section(
         raise SurfaceError("initial_state", f"must be one vector, got shape {y0.shape}")
     _check_arrays(system, p, y0)
     ta, crossings = _integrator(req.prep, req.direction, req.tolerance)
+    assert isinstance(crossings, _Crossings)  # the scalar integrator's event callback (batch = 0)
     ts = req.prep.ts
     n_vars = len(ts.variables)
 
@@ -312,6 +313,7 @@ def section_batch(
     _check_arrays(system, P, Y)
     batch = hy.recommended_simd_size()
     ta, recorder = _integrator(req.prep, req.direction, req.tolerance, batch)
+    assert isinstance(recorder, _BatchCrossings)  # the batch integrator's event callback (batch > 0)
     n_groups = -(-len(Y) // batch)
     results: list[Section | IntegrationError] = []
     for g in range(n_groups):

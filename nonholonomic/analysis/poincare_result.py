@@ -122,8 +122,8 @@ def _finish(req: _Request, runtime: np.ndarray, y0: np.ndarray, t: np.ndarray, r
     # Everything reported, evaluated at the initial state (column 0) and the points in one call.
     report = kernels.evaluate(np.vstack([y0[None, :], x]), runtime, req.value)
     points: dict[str, np.ndarray] = {vec.name: x[:, cols] for vec, cols in zip(system.state, kernels.slices)}
-    for name, rows in kernels.derived:
-        points[name] = report[rows, 1:].T
+    for name, derived_rows in kernels.derived:
+        points[name] = report[derived_rows, 1:].T
     coordinates = np.empty((len(t), 2))
     for j, name in enumerate(req.coordinates):
         vec, i = req.prep.locate[name]

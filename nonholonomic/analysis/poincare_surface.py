@@ -201,11 +201,11 @@ def _surface_kernels(system: MechanicalSystem, expr: sp.Expr) -> _SurfaceKernels
         start += len(vec.symbols)
     gradient = [sp.diff(expr, s) for s in system.state_symbols]
     rows = [expr, sum(d * f for d, f in zip(gradient, system.rhs))] + list(system.rhs)
-    rows += [system.reduced_time.density] if has_tau else []
+    rows += [system.reduced_time.density] if system.reduced_time is not None else []  # has_tau
     derived = []
-    for vec in system.derived:
-        derived.append((vec.name, slice(len(rows), len(rows) + len(vec.expression))))
-        rows += list(vec.expression)
+    for derived_vec in system.derived:
+        derived.append((derived_vec.name, slice(len(rows), len(rows) + len(derived_vec.expression))))
+        rows += list(derived_vec.expression)
     k, first = len(system.integrals), len(rows)
     rows += [i.expression for i in system.integrals] + [i.scale for i in system.integrals]
     rows.append(sum(sp.Abs(d) * norm for d, norm in zip(gradient, norm_of)))

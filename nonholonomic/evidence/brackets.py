@@ -444,7 +444,8 @@ def _short(expr: sp.Expr, limit: int = 200) -> str:
 
 def _prove_antisymmetry(P: sp.Matrix, names: Sequence[str],
                         max_ops: int = MAX_PROOF_OPS) -> tuple[bool | None, str, list[dict]]:
-    offending, undecided = [], []
+    offending: list[dict] = []
+    undecided: list[dict] = []
     for i in range(P.rows):
         for j in range(i, P.cols):
             verdict, _ = _vanishes(P[i, j] + P[j, i], max_ops)

@@ -139,9 +139,9 @@ class _Parser:
 
     def operator_error(self, node: ast.BinOp) -> ExpressionError:
         symbol = _OPERATORS.get(type(node.op), "?")
-        gap = self.clean[node.left.end_col_offset:node.right.col_offset]  # type: ignore[attr-defined]
+        gap = self.clean[node.left.end_col_offset:node.right.col_offset]
         found = gap.find(symbol)
-        position = node.left.end_col_offset + found if found >= 0 else node.col_offset  # type: ignore[attr-defined]
+        position = _end(node.left) + found if found >= 0 else node.col_offset
         if isinstance(node.op, ast.BitXor):
             return self.error("'^' is not a power operator: use ** for powers", position)
         return self.error(f"operator '{symbol}' is not allowed (use + - * / **)", position)
@@ -159,7 +159,7 @@ class _Parser:
                 raise self.at(node, f"number {_fmt(Fraction(v))} is too large (|value| <= 1e15)")
             return Fraction(v)
         if isinstance(v, float):
-            source = self.clean[node.col_offset:node.end_col_offset].replace("_", "")  # type: ignore[attr-defined]
+            source = self.clean[node.col_offset:node.end_col_offset].replace("_", "")
             try:
                 d = Decimal(source)
             except InvalidOperation as err:  # pragma: no cover - Python accepted it as a float
@@ -293,7 +293,10 @@ class _Parser:
                 if v == 0:
                     raise self.at(operand, "division by zero")
                 if self.enclosure.constant(v):
-                    self.certify(operand, lambda v=v: _inverse(self.enclosure.box(v), "the denominator"))
+                    def inverse(denominator: sp.Expr = v) -> tuple[float, float]:
+                        return _inverse(self.enclosure.box(denominator), "the denominator")
+
+                    self.certify(operand, inverse)
                 v = self.power(v, sp.Integer(-1), operand, operand)
             items.append(v)
         return self.checked((sp.Add if _CHAIN[type(node.op)] == _SUM else sp.Mul)(*items), node)
@@ -398,11 +401,17 @@ def _prescan(text: str, max_length: int, max_depth: int) -> str:
     return clean
 
 
+def _end(node: ast.expr) -> int:
+    """Where ``node`` ends in the source (``ast.parse`` sets it on every node of a parsed expression)."""
+    assert node.end_col_offset is not None
+    return node.end_col_offset
+
+
 def _check_size(tree: ast.Expression, text: str, max_depth: int, max_nodes: int) -> None:
     """Node count and nesting depth, both computed without recursion."""
     nodes = [n for n in ast.walk(tree.body) if isinstance(n, ast.expr)]
     if len(nodes) > max_nodes:  # position: text[:position + 1] already holds max_nodes + 1 nodes
-        position = sorted(n.end_col_offset for n in nodes)[max_nodes] - 1  # type: ignore[misc]
+        position = sorted(_end(n) for n in nodes)[max_nodes] - 1
         raise ExpressionError(f"expression has {len(nodes)} nodes; the limit is {max_nodes}", position, text)
     stack: list[tuple[ast.AST, int]] = [(tree.body, 1)]
     while stack:

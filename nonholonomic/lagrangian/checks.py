@@ -114,11 +114,12 @@ def check_sample_points(data: LagrangianData, rests: tuple[sp.Expr, ...] = ()) -
                                  "zero, so M is singular (a coordinate without inertia)")
     points = sample_points(data)
     fields = [("L", M), *((f"constraints[{i}]", data.A[i, :]) for i in range(data.A.shape[0]))]
-    evaluated = []
+    evaluated: list[tuple[dict[sp.Symbol, float], dict[str, np.ndarray]]] = []
     for point in points:
-        values = {field: numeric_matrix(sp.Matrix(matrix), point) for field, matrix in fields}
-        if all(value is not None for value in values.values()):
-            evaluated.append((point, values))
+        computed = {field: numeric_matrix(sp.Matrix(matrix), point) for field, matrix in fields}
+        finite = {field: value for field, value in computed.items() if value is not None}
+        if len(finite) == len(computed):
+            evaluated.append((point, finite))
     if not evaluated:
         field = next((f for f, m in fields if all(numeric_matrix(sp.Matrix(m), p) is None for p in points)), "L")
         raise DataError(field, f"is not real and finite at any of {len(points)} sample points with coordinates in "
@@ -138,12 +139,13 @@ def check_sample_points(data: LagrangianData, rests: tuple[sp.Expr, ...] = ()) -
     k = data.A.shape[0]
     if k == 0:
         return
-    dependent = []
+    dependent: list[int | None] = []
     for _, values in evaluated:
         A = np.vstack([values[f"constraints[{i}]"] for i in range(k)])
         dependent.append(first_dependent_row(A))
-    if None not in dependent:
-        i = max(dependent)  # the point where the most constraints are independent
+    rows = [row for row in dependent if row is not None]
+    if len(rows) == len(dependent):  # a dependent row at every point
+        i = max(rows)  # the point where the most constraints are independent
         raise DataError(f"constraints[{i}]", f"depends on the constraints before it (rank A(q) < {k} at every "
                                              "sample point): remove it")
     for _, values in evaluated:

@@ -77,6 +77,8 @@ def _same_field(data: LagrangianData, reduction: ChaplyginReduction) -> tuple[bo
 
     from nonholonomic.systems.generalized_chaplygin import accelerations
 
+    reduced_data = reduction.data
+    assert reduced_data is not None  # called on a reduced system only
     eqs = derive(data)
     on = dict(reduction.dependent)
     rng = np.random.default_rng(20261126)
@@ -85,7 +87,7 @@ def _same_field(data: LagrangianData, reduction: ChaplyginReduction) -> tuple[bo
     if data.parameters:  # the parameters' own values at the first point (the job's system)
         points[0][len(data.q) + len(data.v):] = [mpmath.mpf(v) for v in data.values]
     how = "cancelled to 0"
-    for i, reduced in zip(reduction.shape, accelerations(reduction.data)):
+    for i, reduced in zip(reduction.shape, accelerations(reduced_data)):
         user = eqs.qddot[i].xreplace(on)
         difference = user - reduced
         if sp.count_ops(difference) <= CANCEL_OPS and tidy(difference) == 0:
@@ -170,4 +172,4 @@ def hamiltonization(data: LagrangianData) -> Hamiltonization:
     outcome = bounded.run(("lagrangian.hamiltonization", data), _hamiltonization, (data,))
     if outcome.status != "done":
         return Hamiltonization(None, None, {"verdict": "undecided", "reason": f"sympy failed: {outcome.message}"})
-    return outcome.value  # type: ignore[no-any-return]
+    return outcome.value

@@ -28,10 +28,12 @@ import math
 import time
 from dataclasses import dataclass
 from fractions import Fraction
+from typing import Any
 
 import numpy as np
 import sympy as sp
 from sympy.polys.matrices import DomainMatrix
+from sympy.polys.rings import PolyElement
 
 from nonholonomic import bounded
 from nonholonomic.lagrangian.equations import derive
@@ -127,8 +129,11 @@ class _System:
         self.u, self.gu = tuple(v[j] for j in self.ind), [self.gv[j] for j in self.ind]
         rows = [[self.poly(f)[0].diff(self.gv[j]) for j in range(n)] for f in data.constraints]  # denominators cleared
         minor = DomainMatrix([[r[j] for j in self.dep] for r in rows], (k, k), self.R.to_domain())
-        adj, delta = minor.adj_det() if k else (None, self.R.one)  # adj(minor), det(minor)
-        adj = adj.to_list() if k else []
+        if k:
+            adjugate, delta = minor.adj_det()  # adj(minor), det(minor)
+            adj = adjugate.to_list()
+        else:
+            adj, delta = [], self.R.one
         self.qdot = [delta * self.gv[j] if j in self.ind else self.R.zero for j in range(n)]
         for b, j in enumerate(self.dep):  # Δ q̇_dep = −adj(minor) A_ind u
             self.qdot[j] = -sum((adj[b][a] * rows[a][i] * self.gv[i] for a in range(k) for i in self.ind), self.R.zero)
@@ -162,7 +167,7 @@ class _System:
         C, S = self.trig.get(i, (None, None))
         return f.diff(self.gq[i]) + (C * f.diff(S) - S * f.diff(C) if C is not None else 0)
 
-    def restrict(self, f):
+    def restrict(self, f: PolyElement) -> PolyElement:
         """Δ² f(q, q̇ = qdot/Δ) for f of degree ≤ 2 in q̇."""
         parts: dict[int, list] = {}
         for m, c in f.terms():
@@ -211,7 +216,8 @@ class _Modular:
     unless given."""
 
     def __init__(self, sys: _System, p: int, draws: np.ndarray, u: np.ndarray | None = None) -> None:
-        self.sys, self.p, self.K, self.cache = sys, p, draws.shape[1], {}
+        self.sys, self.p, self.K = sys, p, draws.shape[1]
+        self.cache: dict[tuple[int, int], np.ndarray] = {}
         vals = {g: x % p for g, x in zip(sys.gu, u if u is not None else [])}
         for i in range(sys.n):
             x = vals[sys.gq[i]] = draws[i] % p
@@ -240,7 +246,7 @@ def _rref(M: np.ndarray, p: int) -> tuple[np.ndarray, list[int]]:
     """The reduced row echelon form of M modulo p and its pivot columns."""
     M, pivots, r = M % p, [], 0
     for c in range(M.shape[1]):
-        nz = np.nonzero(M[r:, c])[0] if r < M.shape[0] else ()
+        nz = np.nonzero(M[r:, c])[0] if r < M.shape[0] else np.empty(0, dtype=np.intp)
         if len(nz):
             M[[r, r + nz[0]]] = M[[r + nz[0], r]]
             M[r, c:] = M[r, c:] * pow(int(M[r, c]), -1, p) % p
@@ -282,8 +288,8 @@ def _rows(mod: _Modular, basis: list, mus: list, kappas: list) -> np.ndarray:
                 acc[index[kappa]] = (acc[index[kappa]] + D[l] - k * phi % p * dlog[l] % p) % p
         for j in (j for j in range(m) if mu[j]):
             for nu, val in P[j].items():
-                kappa = index[tuple(e - (i == j) + nu[i] for i, e in enumerate(mu))]
-                acc[kappa] = (acc[kappa] + mu[j] * phi % p * val % p) % p
+                row = index[tuple(e - (i == j) + nu[i] for i, e in enumerate(mu))]
+                acc[row] = (acc[row] + mu[j] * phi % p * val % p) % p
         acc = acc * _inv(mod(sys.delta ** k), p) % p
         blocks.append(acc.transpose(0, 2, 1).reshape(len(kappas) * K, len(basis)))
     return np.hstack(blocks)
@@ -333,7 +339,8 @@ class _Span:
     """A growing span of vectors modulo p, in echelon form; ``add`` says whether x was independent."""
 
     def __init__(self, p: int, *vectors: np.ndarray) -> None:
-        self.p, self.rows = p, []
+        self.p = p
+        self.rows: list[tuple[int, np.ndarray]] = []
         for x in vectors:
             self.add(x)
 
@@ -356,13 +363,15 @@ def _present(sys: _System, found: list[tuple]) -> tuple[list, int, bool]:
     p, K, E = PRIMES[0], 64 + 8 * len(found), sys.E
     rng = np.random.default_rng(20240707)
     mod = _Modular(sys, p, rng.integers(1, 2**30, size=(sys.n, K)), rng.integers(1, 2**30, size=(len(sys.gu), K)))
-    value = {i: mod(N) * _inv(mod(Phi), p) % p for i, (_, N, Phi) in enumerate(found)}
+    value: dict[int | None, Any] = {i: mod(N) * _inv(mod(Phi), p) % p for i, (_, N, Phi) in enumerate(found)}
     value[None] = mod(E[0]) * _inv(mod(E[1]), p) % p if E else None
     ones = np.ones(K, np.int64)
     energy_in = E is not None and not _Span(p, ones, *(value[i] for i in range(len(found)))).reduce(value[None]).any()
-    order = sorted(range(len(found)), key=lambda i: found[i][0])
-    order[sum(found[i][0] < 2 for i in order):0] = [None] if E else []  # the energy before the quadratic ones
-    span, kept, omitted, work = _Span(p, ones), [], 0, 0
+    ranked = sorted(range(len(found)), key=lambda i: found[i][0])
+    order: list[int | None] = list(ranked)
+    order[sum(found[i][0] < 2 for i in ranked):0] = [None] if E else []  # the energy before the quadratic ones
+    span, omitted, work = _Span(p, ones), 0, 0
+    kept: list[tuple[int | None, int]] = []
     for i in order:
         degree = found[i][0] if i is not None else 2
         if not span.add(value[i]) and i is not None:
@@ -402,7 +411,11 @@ def _search(data: LagrangianData) -> tuple:
     listed, omitted, energy_in = _present(sys, found)
     integrals, where = [], " (at the parameters' values)" if data.parameters else ""
     for index in listed:
-        k, N, Phi = found[index] if index is not None else (2, *sys.E)
+        if index is not None:
+            k, N, Phi = found[index]
+        else:
+            assert sys.E is not None  # the energy (index None) is listed only when there is one
+            k, N, Phi = (2, *sys.E)
         if len(N.terms()) > MAX_PROOF_TERMS:
             proof = (f"unproven: the proof not tried: {len(N.terms()):,} terms > max {MAX_PROOF_TERMS:,} "
                      "(MAX_PROOF_TERMS); dF/dt vanishes at the sample points modulo three primes")

@@ -149,9 +149,10 @@ def _rank(rows: list[sp.Matrix], points: list[dict[sp.Symbol, sp.Expr]]) -> int:
     best = 0
     for p in points:
         values = [[_value(e, p) for e in row] for row in rows]
-        if any(v is None for row in values for v in row):
+        real = [[v.real for v in row if v is not None] for row in values]
+        if any(len(r) != len(row) for r, row in zip(real, values)):  # an entry without a value here
             continue
-        matrix = np.array([[v.real for v in row] for row in values], dtype=float)
+        matrix = np.array(real, dtype=float)
         if matrix.size:
             s = np.linalg.svd(matrix, compute_uv=False)
             best = max(best, int(np.sum(s > 1e-10 * max(s[0], 1e-300))))
@@ -245,7 +246,7 @@ def _gradient(data: LagrangianData, B: sp.Matrix, c: list[sp.Expr], points, floa
     for _ in range(MAX_BRACKET_DEPTH):
         if _rank([r[0].T for r in rows], points) >= n or not frontier:
             break
-        new = []
+        new: list[tuple[sp.Matrix, sp.Expr, str]] = []
         for (X, dX, nX), (Y, dY, nY) in itertools.product(base, frontier):
             if nX == nY:
                 continue

@@ -16,17 +16,17 @@ from typing import Any
 
 from nonholonomic import bounded
 from nonholonomic.report import ball, others, veselova
-from nonholonomic.report.verdict import UNRESOLVED, VERDICTS, Check, Claim, Row
+from nonholonomic.report.verdict import UNRESOLVED, VERDICTS, Check, Claim, Row, RowBuilder
 
 #: Every claim's row builder, in the paper's order.
-ROWS: list[Callable[[], Row]] = ball.ROWS[:3] + veselova.ROWS + ball.ROWS[3:] + others.ROWS
+ROWS: list[RowBuilder] = ball.ROWS[:3] + veselova.ROWS + ball.ROWS[3:] + others.ROWS
 
 PAPER = 'A. V. Borisov, I. S. Mamaev, "Hamiltonization of nonholonomic systems"'
 
 
 def claim_ids() -> list[str]:
     """The row ids in report order (read off the builders, nothing is run)."""
-    return [fn.claim_id for fn in ROWS]  # type: ignore[attr-defined]
+    return [fn.claim_id for fn in ROWS]
 
 
 def paper_report(progress: Callable[[float], bool] | None = None,
@@ -58,7 +58,7 @@ def paper_report(progress: Callable[[float], bool] | None = None,
                       [Check(None, None, None, "error", f"{type(exc).__name__}: {exc}; "
                              + traceback.format_exc(limit=3).replace("\n", " | "))])
         row.seconds = time.perf_counter() - t0
-        row.id = build.claim_id  # type: ignore[attr-defined]
+        row.id = build.claim_id
         rows.append(row.to_json())
         if progress is not None and not progress((i + 1) / len(builders)):
             complete = False

@@ -4,7 +4,7 @@ monopoles) and "Chaplygin's ball" (eq. 2604-1 … 2604-7, 001 … 007, Theorem 3
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
@@ -29,13 +29,13 @@ from nonholonomic.report.common import (
     run,
     trig_identity,
 )
-from nonholonomic.report.verdict import Check, Claim, Row, claim_id
+from nonholonomic.report.verdict import Check, Claim, Row, RowBuilder, claim_id
 from nonholonomic.systems import chaplygin_ball as ball, get_system
 
 GENERAL = "Generalized Chaplygin systems"
 SECTION = "Chaplygin's ball"
 LINEAR = {"inertia": INERTIA, "D": D, "a": A}
-STATE = {"M": [0.5, -0.2, 0.1], "gamma": GAMMA0}
+STATE: dict[str, Sequence[float]] = {"M": [0.5, -0.2, 0.1], "gamma": GAMMA0}
 #: The ball's parameter symbols at the report's values.
 BALL_VALUES = {ball.I1: INERTIA[0], ball.I2: INERTIA[1], ball.I3: INERTIA[2], ball.D: D}
 #: Values for the ball's Euler-angle forms (c the constant of areas).
@@ -241,6 +241,6 @@ def theorem_3() -> Row:
                                            f"push-forward residual with the printed B^(-1/2): {wrong:.3g}"))
 
 
-ROWS: list[Callable[[], Row]] = [theorem_1, bracket_2704_9, monopole, integrals, measure, integral_F, bracket,
+ROWS: list[RowBuilder] = [theorem_1, bracket_2704_9, monopole, integrals, measure, integral_F, bracket,
                                  hamiltonian_form_row, ball_multiplier, local_forms, s_bar_007, hamiltonian_in_angles,
                                  theorem_3]

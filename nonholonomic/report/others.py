@@ -5,7 +5,6 @@ rubber ball), "Nonholonomic Jacobi problem" (the ball on a surface) and the Kirc
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 
 import numpy as np
 import sympy as sp
@@ -25,7 +24,7 @@ from nonholonomic.report.common import (
     proof,
     run,
 )
-from nonholonomic.report.verdict import Check, Claim, Row, claim_id
+from nonholonomic.report.verdict import Check, Claim, Row, RowBuilder, claim_id
 from nonholonomic.systems import ball_on_quadric as bq, chaplygin_ball as cb, chaplygin_ball_veselova as bv, get_system
 
 VESELOVA_BALL = "Chaplygin's ball with the Veselova constraint"
@@ -203,6 +202,6 @@ def clebsch_integrals() -> Row:
     return Row(claim, [integrals_check(_example_run("clebsch"))])
 
 
-ROWS: list[Callable[[], Row]] = [veselova_ball_multiplier, veselova_ball_integrals, veselova_ball_measure, rubber_ball,
+ROWS: list[RowBuilder] = [veselova_ball_multiplier, veselova_ball_integrals, veselova_ball_measure, rubber_ball,
                                  quadric_energy, quadric_energy_coefficient, quadric_measure, quadric_K, jacobi_chaos,
                                  neumann_integrals, clebsch_integrals]

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
-
-F = TypeVar("F", bound=Callable[..., Any])
+from typing import Any, Protocol, cast
 
 HOLDS, CORRECTED, FAILS, UNRESOLVED = "holds", "holds after correction", "fails", "unresolved"
 VERDICTS = (HOLDS, CORRECTED, FAILS, UNRESOLVED)
@@ -91,12 +89,22 @@ class Row:
         }
 
 
-def claim_id(name: str) -> Callable[[F], F]:
+class RowBuilder(Protocol):
+    """A claim's row builder, marked with its claim id by :func:`claim_id`."""
+
+    __name__: str
+    claim_id: str
+
+    def __call__(self) -> Row: ...
+
+
+def claim_id(name: str) -> Callable[[Callable[[], Row]], RowBuilder]:
     """Give a row builder its claim id (``section.name``), readable without running it."""
 
-    def mark(fn: F) -> F:
-        fn.claim_id = name  # type: ignore[attr-defined]
-        return fn
+    def mark(fn: Callable[[], Row]) -> RowBuilder:
+        builder = cast(RowBuilder, fn)  # the function itself, which takes the attribute set next
+        builder.claim_id = name
+        return builder
 
     return mark
 

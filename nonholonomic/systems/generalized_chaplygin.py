@@ -149,10 +149,12 @@ def velocity_degree(expr: sp.Expr, v: frozenset[sp.Symbol]) -> int | None:
         return 1
     if isinstance(expr, sp.Add):
         parts = [velocity_degree(a, v) for a in expr.args]
-        return None if None in parts else max(parts)  # type: ignore[type-var]
+        known = [d for d in parts if d is not None]
+        return max(known) if len(known) == len(parts) else None
     if isinstance(expr, sp.Mul):
         parts = [velocity_degree(a, v) for a in expr.args]
-        return None if None in parts else sum(parts)  # type: ignore[arg-type]
+        known = [d for d in parts if d is not None]
+        return sum(known) if len(known) == len(parts) else None
     if isinstance(expr, sp.Pow) and expr.exp.is_Integer and expr.exp > 0:
         base = velocity_degree(expr.base, v)
         return None if base is None else base * int(expr.exp)
@@ -228,6 +230,7 @@ def theorem_1(data: ChaplyginData) -> tuple[Any, str]:
     det = G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0]
     velocity = sp.Matrix([[G[1, 1], -G[0, 1]], [-G[1, 0], G[0, 0]]]) * (sp.Matrix(p) / N - w) / det  # G⁻¹(p/N − w)
     theorem = result.bracket
+    assert theorem is not None  # set with the reducing multiplier
     bracket = PoissonStructure(
         "generalized_chaplygin", "2704-9", theorem.variables, -theorem.matrix, parameters=theorem.parameters,
         formula="{q_i, p_j} = delta_ij, {p1, p2} = S_bar(q) with dx/dtau = {x, H_bar} (Theorem 1); stored with the "
@@ -273,7 +276,7 @@ def define(data: ChaplyginData, reduce: bool = True) -> MechanicalSystem:
                                    "rho dP dq of Theorem 1 with dP = det G dqdot)", "2704-8")
         reduced = ReducedTime(N, f"d tau = N dt, N = {sp.sstr(N)} (Theorem 1)", "2704-8", "s (times N's unit)")
     else:
-        measure = InvariantMeasure(None, f"none claimed: {why}", "2704-7")  # type: ignore[arg-type]
+        measure = InvariantMeasure(None, f"none claimed: {why}", "2704-7")
         reduced = None
     texts = dict(data.texts)
     return MechanicalSystem(

@@ -125,7 +125,7 @@ def _measure(data: LagrangianData) -> tuple[InvariantMeasure, dict[str, Any]]:
                                "independent_velocities": [str(u) for u in verdict.velocities],
                                "dependent_velocities": {str(s): sp.sstr(e) for s, e in verdict.dependent}}
     if verdict.status != "found" or verdict.density is None:
-        return InvariantMeasure(None, f"verdict {verdict.status}: {verdict.reason}", EQUATION), summary  # type: ignore[arg-type]
+        return InvariantMeasure(None, f"verdict {verdict.status}: {verdict.reason}", EQUATION), summary
     dependent = [data.v.index(s) for s, _ in verdict.dependent]
     minor = sp.factor(sp.Matrix(data.A).extract(list(range(len(dependent))), dependent).det()) if dependent else 1
     sign = 1
@@ -237,7 +237,7 @@ def _assemble(data: LagrangianData, rhs: tuple[sp.Expr, ...], reduce: bool, gene
         theorem = hamiltonization(data)
         form, reduced_time = theorem.form, theorem.reduced_time
         if generic and measure.density is not None and summary.get("at_values"):  # found only at the values
-            measure = InvariantMeasure(None, f"not claimed: {GENERIC}; {measure.formula}", EQUATION)  # type: ignore[arg-type]
+            measure = InvariantMeasure(None, f"not claimed: {GENERIC}; {measure.formula}", EQUATION)
             summary = {**summary, "claimed": False}
         theorem_summary = theorem.summary
         if generic and form is not None and theorem.summary.get("at_values"):  # found only at the values
@@ -246,7 +246,7 @@ def _assemble(data: LagrangianData, rhs: tuple[sp.Expr, ...], reduce: bool, gene
         integrals += found
         structure = {"measure": summary, "integrals": integrals_summary, "hamiltonization": theorem_summary}
     else:
-        measure = InvariantMeasure(None, NO_MEASURE, EQUATION)  # type: ignore[arg-type]
+        measure = InvariantMeasure(None, NO_MEASURE, EQUATION)
     return MechanicalSystem(
         kind=KIND,
         potential="zero",

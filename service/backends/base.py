@@ -77,8 +77,11 @@ class JobBackend(Protocol):
     mode: str
     #: Where ensembles' records and member results live.
     ensembles: EnsembleStore
-    #: The Redis every API process shares (queue mode: idempotency keys live there), None in embedded mode.
-    redis: redis.Redis | None
+
+    # Read-only (a property): embedded declares it None, queue a redis.Redis (a mutable attribute is invariant).
+    @property
+    def redis(self) -> redis.Redis | None:
+        """The Redis every API process shares (queue mode: idempotency keys live there), None in embedded mode."""
 
     def submit(self, request: dict[str, Any], owner: str | None = None,
                max_active: int | None = None) -> JobRecord:

@@ -51,7 +51,7 @@ async def submit_ensemble(body: EnsembleRequest, request: Request, backend: Back
         ensemble_id = admit_ensemble(backend, owner, settings, spec, chunks)
         location = f"/v1/ensembles/{ensemble_id}"
         accepted = EnsembleAccepted(id=ensemble_id, status="queued", location=location, members=body.members.count,
-                                    chunks=len(chunks))
+                                    chunks=len(chunks), deprecations=body.deprecations())
         return accepted.model_dump(), {"Location": location}
 
     return await run_in_threadpool(idempotent, request, owner, spec, create)

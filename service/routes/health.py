@@ -141,10 +141,11 @@ async def lifespan(app: FastAPI) -> AsyncIterator[None]:
 
 
 router = APIRouter(tags=["health"], generate_unique_id_function=operation_id, lifespan=lifespan)
-_DEGRADED = {503: {"description": "a job would not start now (no broker, no worker on the queue, or workers still "
-                                  "warming up): the same body with status 'degraded' and a detail",
-                   "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Health"}},
-                               PROBLEM_MEDIA_TYPE: {"schema": {"$ref": PROBLEM_SCHEMA_REF}}}}}
+_DEGRADED: dict[int | str, dict[str, Any]] = {
+    503: {"description": "a job would not start now (no broker, no worker on the queue, or workers still "
+                         "warming up): the same body with status 'degraded' and a detail",
+          "content": {"application/json": {"schema": {"$ref": "#/components/schemas/Health"}},
+                      PROBLEM_MEDIA_TYPE: {"schema": {"$ref": PROBLEM_SCHEMA_REF}}}}}
 
 
 def _no_answer(backend: Any) -> dict[str, Any]:

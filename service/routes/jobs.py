@@ -73,7 +73,8 @@ async def submit_job(job: JobRequest, request: Request, backend: Backend, owner:
     def create() -> tuple[dict[str, Any], dict[str, str]]:
         record = admit_job(backend, owner, settings, body)
         location = f"/v1/jobs/{record.id}"
-        return JobAccepted(id=record.id, status="queued", location=location).model_dump(), {"Location": location}
+        accepted = JobAccepted(id=record.id, status="queued", location=location, deprecations=job.deprecations())
+        return accepted.model_dump(), {"Location": location}
 
     return await run_in_threadpool(idempotent, request, owner, body, create)
 
@@ -203,6 +204,6 @@ def list_jobs(backend: Backend, owner: Owner,
         records, next_cursor = backend.list_jobs(status, limit, cursor, owner)
     except InvalidCursor as exc:
         raise invalid_request([FieldError(field="cursor", reason=str(exc))]) from None
-    return JobList(items=[JobListItem(id=r.id, status=r.status, progress=r.progress, created_at=r.created_at,  # type: ignore[arg-type]
+    return JobList(items=[JobListItem(id=r.id, status=r.status, progress=r.progress, created_at=r.created_at,
                                       kind=job_kind(r.request), location=f"/v1/jobs/{r.id}") for r in records],
                    next_cursor=next_cursor)

@@ -20,8 +20,9 @@ router = APIRouter(prefix="/v1/maps", tags=["maps"], generate_unique_id_function
 @router.get("", operation_id="maps-list", response_model=MapList, response_model_exclude_unset=True,
             summary="The isomorphisms: source, target, time substitution, level set, corrections")
 def list_maps() -> dict[str, Any]:
-    return {"maps": [describe(get_map(name, (MAPS[name][1] or ("zero",))[0])) | {
-        "source_potentials": list(MAPS[name][1]) if MAPS[name][1] else "all of the source's"} for name in MAPS]}
+    return {"maps": [describe(get_map(name, (potentials or ("zero",))[0])) | {
+        "source_potentials": list(potentials) if potentials else "all of the source's"}
+        for name, (_, potentials) in MAPS.items()]}
 
 
 @router.post("/{name}", operation_id="maps-apply", response_model=MapResult, response_model_exclude_unset=True,
@@ -32,15 +33,17 @@ def list_maps() -> dict[str, Any]:
 def apply_map(name: str, request: MapRequest) -> dict[str, Any]:
     if name not in MAPS:
         raise ProblemError(404, "Unknown map", f"no map {name!r}; known: {', '.join(MAPS)}", NOT_FOUND)
-    if request.system.kind != SOURCE_KINDS[name]:  # type: ignore[attr-defined]
+    kind: str = request.system.kind  # type: ignore[attr-defined]  # create_model's field
+    if kind != SOURCE_KINDS[name]:
         raise invalid_request([FieldError(field="system.kind", reason=(
-            f"{name} maps from {SOURCE_KINDS[name]}, not {request.system.kind}"))])  # type: ignore[attr-defined]
-    potential = request.system.potential.kind  # type: ignore[attr-defined]
+            f"{name} maps from {SOURCE_KINDS[name]}, not {kind}"))])
+    potential: str = request.system.potential.kind  # type: ignore[attr-defined]  # create_model's field
     try:
         m = get_map(name, potential)
     except KeyError as exc:
         raise invalid_request([FieldError(field="system.potential.kind", reason=str(exc.args[0]))]) from None
-    out = map_states(m, request.system.parameter_values(), request.states,  # refused states: a 422 (service.errors)
+    out = map_states(m, request.system.parameter_values(),  # refused states: a 422 (service.errors)
+                     request.states,  # type: ignore[arg-type]  # nonholonomic.isomorphisms's annotation: not Mapping
                      inverse=request.inverse, project=request.project)
     infinite = list(_non_finite(out))
     if infinite:  # e.g. Theorem 3 with D = 0: alpha = -beta = det J / D

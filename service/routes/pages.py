@@ -100,15 +100,16 @@ def report_html(record: JobRecord) -> HTMLResponse:
 def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Request, backend: Backend,
                    owner: Owner) -> Response:
     record = job_of(backend, owner, job_id)
-    if record.status != "succeeded" or record.result is None:
+    result = record.result
+    if record.status != "succeeded" or result is None:
         raise ProblemError(409, "No result yet", f"job {job_id} is {record.status}; its plots are there once it "
                                                  "succeeded", CONFLICT)
-    if "trajectory" not in record.result:
+    if "trajectory" not in result:
         raise ProblemError(409, "No plots", f"job {job_id} is a paper report, not a simulation", CONFLICT)
     from service.plots import PlotUnavailable, job_plot  # matplotlib: imported when the first plot is drawn
 
     try:
-        data = _cache.get(("job", job_id, name, fmt), lambda: job_plot(name, record.result, record.request, fmt),
+        data = _cache.get(("job", job_id, name, fmt), lambda: job_plot(name, result, record.request, fmt),
                           keep=True)
     except PlotUnavailable as exc:
         raise ProblemError(409, "Plot unavailable", str(exc), CONFLICT) from None

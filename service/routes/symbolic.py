@@ -99,7 +99,7 @@ def _expressions(request: BracketVerifyRequest | HamiltonizeRequest) -> list[tup
     if isinstance(request, BracketVerifyRequest):
         return ([(f"matrix[{i}][{j}]", e) for i, row in enumerate(request.matrix) for j, e in enumerate(row)]
                 + [(f"casimirs.{name}", e) for name, e in request.casimirs.items()])
-    found = [(f, getattr(request, f)) for f in ("lagrangian", "a1", "a2", "b", "potential") if getattr(request, f)]
+    found = [(f, getattr(request, f)) for f in ("L", "a1", "a2", "b", "potential") if getattr(request, f)]
     if request.monopole is not None:
         found += [(f"monopole.domain[{i}][{j}]", e) for i, pair in enumerate(request.monopole.domain)
                   for j, e in enumerate(pair)]
@@ -127,8 +127,9 @@ def _check_size(request: BracketVerifyRequest | HamiltonizeRequest, settings: Se
 
 
 def _deprecations(request: BracketVerifyRequest | HamiltonizeRequest) -> list[str]:
-    """Notes on the deprecated fields the request sent (``budget_s``)."""
-    return [BUDGET_S_DEPRECATED] if "budget_s" in request.model_fields_set else []
+    """Notes on the deprecated fields the request sent (``budget_s``; ``lagrangian``, now ``L``)."""
+    renamed = request.renamed_fields() if isinstance(request, HamiltonizeRequest) else []
+    return [*([BUDGET_S_DEPRECATED] if "budget_s" in request.model_fields_set else []), *renamed]
 
 
 #: RFC 9211's ``Cache-Status`` of a symbolic answer: read back, or computed and stored.
@@ -217,7 +218,7 @@ def _verify_in_child(payload: dict[str, Any]) -> dict[str, Any]:
              summary="Jacobi identity, Casimirs and rank of a user-given bracket")
 async def verify_bracket(request: BracketVerifyRequest, http: Request, response: Response) -> dict[str, Any]:
     _check_size(request, get_settings())
-    return await _run(http, _verify_in_child, request, response)  # type: ignore[no-any-return]
+    return await _run(http, _verify_in_child, request, response)
 
 
 def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
@@ -227,10 +228,10 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
     request = HamiltonizeRequest.model_validate(payload)
     names = request.coordinates + request.velocities + list(request.parameters) + request.symbols
     symbols = _declare(names, "coordinates")
-    parsed = {field: _parse(getattr(request, field), symbols, field) for field in ("lagrangian", "a1", "a2", "b")}
+    parsed = {field: _parse(getattr(request, field), symbols, field) for field in ("L", "a1", "a2", "b")}
     potential = None if request.potential is None else _parse(request.potential, symbols, "potential")
     domain, shift, multiplier = _monopole(request, symbols)
-    args = (parsed["lagrangian"], tuple(symbols[q] for q in request.coordinates),
+    args = (parsed["L"], tuple(symbols[q] for q in request.coordinates),
             tuple(symbols[v] for v in request.velocities), parsed["a1"], parsed["a2"], parsed["b"], potential,
             {symbols[k]: v for k, v in request.parameters.items()})
     kwargs = {"domain": domain, "shift": shift, "multiplier_symbol": multiplier, "limits": _limits(request)}
@@ -239,7 +240,7 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
     except RefusedField:
         raise
     except ValueError as exc:
-        raise RefusedField("lagrangian", str(exc)) from None
+        raise RefusedField("L", str(exc)) from None
 
 
 @router.post("/v1/hamiltonize", operation_id="symbolic-hamiltonize", response_model=HamiltonizeResult,
@@ -247,7 +248,7 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
              summary="Reducing multiplier, bracket and Hamiltonian of a 2-DOF Chaplygin system")
 async def hamiltonize(request: HamiltonizeRequest, http: Request, response: Response) -> dict[str, Any]:
     _check_size(request, get_settings())
-    return await _run(http, _hamiltonize_in_child, request, response)  # type: ignore[no-any-return]
+    return await _run(http, _hamiltonize_in_child, request, response)
 
 
 #: The name standing for the reducing multiplier N in ``monopole.shift``.
@@ -302,12 +303,12 @@ def hamiltonize_examples() -> dict[str, Any]:
         veselova_generalized_chaplygin,
     )
 
-    examples = {}
+    examples: dict[str, dict[str, Any]] = {}
     for name, build in (("veselova", veselova_generalized_chaplygin),
                         ("chaplygin_ball", chaplygin_ball_generalized_chaplygin)):
         spec = build()
         coordinates, velocities = spec["coordinates"].split(","), spec["velocities"].split(",")
-        fields = {k: spec[k] for k in ("lagrangian", "a1", "a2", "b")}
+        fields = {k: spec[k] for k in ("L", "a1", "a2", "b")}
         used = _free_names(*fields.values())
         examples[name] = {**fields, "coordinates": coordinates, "velocities": velocities,
                           "symbols": [n for n in used if n not in coordinates + velocities]}

@@ -46,7 +46,7 @@ def get_system(kind: str) -> dict[str, Any]:
     if kind in SYSTEMS:
         return _linked(describe(kind))
     if kind in (GENERALIZED_CHAPLYGIN, LAGRANGIAN):
-        return catalog()[kind]  # type: ignore[no-any-return]
+        return catalog()[kind]
     known = [*SYSTEMS, GENERALIZED_CHAPLYGIN, LAGRANGIAN]
     raise ProblemError(404, "Unknown system kind",
                        f"no system kind {kind!r}{did_you_mean(kind, known)}; known: {sorted(known)}", NOT_FOUND)

@@ -18,7 +18,8 @@ def _members() -> list[str]:
 
 
 def test_the_interface_names_what_the_routes_use() -> None:
-    members = set(_members()) | set(JobBackend.__annotations__)
+    properties = {name for name, value in vars(JobBackend).items() if isinstance(value, property)}
+    members = set(_members()) | set(JobBackend.__annotations__) | properties
     assert {"submit", "reserve_messages", "find", "get", "list_jobs", "redis", "ensembles"} <= members
 
 
