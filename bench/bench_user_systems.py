@@ -92,7 +92,7 @@ def euler_angles(runs: int) -> None:
                             {"omega": omega0, "gamma": gamma0}, 200.0, 401, runs)
     ex = veselova_generalized_chaplygin()
     start = time.perf_counter()
-    data = gc.chaplygin_data(ex["lagrangian"], ("theta", "phi"), ("thetadot", "phidot"), ex["a1"], ex["a2"],
+    data = gc.chaplygin_data(ex["L"], ("theta", "phi"), ("thetadot", "phidot"), ex["a1"], ex["a2"],
                              ex["b"], None, ("I1", "I2", "I3"))
     system = gc.define(data)
     defined = time.perf_counter() - start
@@ -100,7 +100,7 @@ def euler_angles(runs: int) -> None:
     heyoka_template(system, MACHINE_EPSILON)
     compiled = time.perf_counter() - start
     th, ph, thd, phd, _, _ = euler_angles_and_rates(omega0[None, :], gamma0[None, :])
-    t_mine, s_mine, _ = timed(system, INERTIA, {"q": [th[0], ph[0]], "qdot": [thd[0], phd[0]]}, 200.0, 401, runs)
+    t_mine, s_mine, _ = timed(system, INERTIA, {"q": [th[0], ph[0]], "q_dot": [thd[0], phd[0]]}, 200.0, 401, runs)
     q = s_mine[:, :2]
     gamma = np.stack([np.sin(q[:, 0]) * np.sin(q[:, 1]), np.sin(q[:, 0]) * np.cos(q[:, 1]), np.cos(q[:, 0])], axis=1)
     print(f"generalized_chaplygin (Veselova in Euler angles, t and tau) vs veselova, t = 200: {t_mine * 1e3:.2f} ms "

@@ -86,12 +86,12 @@ def catalog() -> dict[str, Any]:
 
     return {"systems": [describe(kind) for kind in SYSTEMS], "generalized_chaplygin": {
         "kind": gc.KIND, "title": gc.TITLE, "equation": "2704-7, 2704-8, 2704-9 (Theorem 1)",
-        "fields": {"coordinates": "names of q1, q2", "velocities": "names of q1dot, q2dot",
+        "fields": {"coordinates": "names of q1, q2", "velocities": "names of q1_dot, q2_dot",
                    "parameters": "every constant of the expressions, with its value",
-                   "lagrangian": "L(q, qdot), quadratic in the velocities",
-                   "a1": "S = a1(q) q1dot + a2(q) q2dot + b(q)", "a2": "see a1", "b": "see a1",
+                   "L": "L(q, q_dot), quadratic in the velocities",
+                   "a1": "S = a1(q) q1_dot + a2(q) q2_dot + b(q)", "a2": "see a1", "b": "see a1",
                    "potential": "U(q) subtracted from L (optional)"},
-        "state": ["q", "qdot"], "checks": ["integrals", "measure", "bracket"], "example": gc.EXAMPLE_JOB},
+        "state": ["q", "q_dot"], "checks": ["integrals", "measure", "bracket"], "example": gc.EXAMPLE_JOB},
         "lagrangian": lagrangian_entry()}
 
 

@@ -168,7 +168,7 @@ def surface_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> 
 
 
 #: Kinds written by the user as a Lagrangian: a field not finite at the initial state names ``initial_state.q``.
-_USER_LAGRANGIAN_KINDS = {"generalized_chaplygin": "the kinetic matrix d2L/dqdot2 is singular there, or L, S or U is",
+_USER_LAGRANGIAN_KINDS = {"generalized_chaplygin": "the kinetic matrix d2L/dq_dot2 is singular there, or L, S or U is",
                           "lagrangian": "the mass matrix d2L/dq_dot2 (or A M^-1 A^T) is singular there, or L or a "
                                         "constraint is"}
 

@@ -374,7 +374,7 @@ def ball_hamiltonian_printed(N_q: sp.Expr = N) -> sp.Expr:
 
 #: Theorem 1 inputs for the Veselova system (U = 0): L = T of eq. (2504-8), S of ERRATA 2 (b = 0).
 _VESELOVA_EXAMPLE = {
-    "lagrangian": "I1*(thetadot*cos(phi) - phidot*sin(phi)*sin(theta)*cos(theta))**2/2"
+    "L": "I1*(thetadot*cos(phi) - phidot*sin(phi)*sin(theta)*cos(theta))**2/2"
                   " + I2*(thetadot*sin(phi) + phidot*cos(phi)*sin(theta)*cos(theta))**2/2"
                   " + I3*phidot**2*sin(theta)**4/2",
     "a1": "(I2 - I1)*sin(theta)**2*sin(phi)*cos(phi)",
@@ -387,7 +387,7 @@ _VESELOVA_EXAMPLE = {
 _BALL_G = "(sin(theta)**2*(I1*sin(phi)**2 + I2*cos(phi)**2) + I3*cos(theta)**2)"
 #: Theorem 1 inputs for Chaplygin's ball (U = 0): L = ℛ (eq. 003, 004), S = −S₍₀₀₃₎.
 _BALL_EXAMPLE = {
-    "lagrangian": "((I1*cos(phi)**2 + I2*sin(phi)**2 + D)*thetadot**2 + (I3 + D*sin(theta)**2)*phidot**2)/2"
+    "L": "((I1*cos(phi)**2 + I2*sin(phi)**2 + D)*thetadot**2 + (I3 + D*sin(theta)**2)*phidot**2)/2"
                   " - (c - (I1 - I2)*thetadot*sin(theta)*sin(phi)*cos(phi) - I3*phidot*cos(theta))**2"
                   f"/(2*{_BALL_G})",
     "a1": f"D*(I1 - I2)*sin(theta)**2*sin(phi)*cos(phi)/{_BALL_G}",

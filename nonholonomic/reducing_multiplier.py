@@ -83,8 +83,8 @@ __all__ = ["EQUATIONS", "ReducingMultiplierResult", "hamiltonize", "monopole_cha
 EQUATIONS: dict[str, str] = {
     "system": "2704-7: d/dt dL/dq1dot - dL/dq1 = q2dot S, d/dt dL/dq2dot - dL/dq2 = -q1dot S, "
               "S = a1 q1dot + a2 q2dot + b",
-    "A1, A2, B": "2704-10: P = dL/dqdot, S = A1 P1 + A2 P2 + B; (A1, A2) = G^-1 (a1, a2), B = b - (a, G^-1 w) "
-                 "for L = qdot G qdot / 2 + (w, qdot) - V",
+    "A1, A2, B": "2704-10: P = dL/dq_dot, S = A1 P1 + A2 P2 + B; (A1, A2) = G^-1 (a1, a2), B = b - (a, G^-1 w) "
+                 "for L = q_dot G q_dot / 2 + (w, q_dot) - V",
     "integrability_condition": "proof of Theorem 1: (1/rho) drho/dq1 = A2, (1/rho) drho/dq2 = -A1; "
                                "solvable (locally) iff dA1/dq1 + dA2/dq2 = 0",
     "density": "proof of Theorem 1: Liouville equation for rho(q) dP1 dP2 dq1 dq2 of 2704-10",
@@ -270,7 +270,7 @@ def _quadratic_lagrangian(L: sp.Expr, q: tuple[sp.Symbol, sp.Symbol], v: tuple[s
     det = sampler.function([det2(G)] + list(G), list(q) + list(v))
     values = [det(*qq, *vv) for qq, vv in zip(sampler.coordinates(4), sampler.velocities(4))]
     if all(abs(x[0]) <= 1e-30 * sum(abs(g) for g in x[1:]) ** 2 for x in values):
-        raise ValueError("the kinetic matrix d2L/dqdot_i dqdot_j is singular (det = 0 at every sampled point); "
+        raise ValueError("the kinetic matrix d2L/dq_dot_i dq_dot_j is singular (det = 0 at every sampled point); "
                          "Theorem 1 needs det != 0")
     return G, w, V
 
@@ -609,7 +609,7 @@ def hamiltonize(lagrangian: sp.Expr, coordinates: tuple[sp.Symbol, sp.Symbol], v
         "residual": res_t1,
         "passed": passed_pw and theorem,
         "detail": (f"convention of Theorem 1, dx/dtau = {{x, H_bar}} = P grad H_bar, P the matrix of eq. 2704-9: max "
-                   f"relative residual {res_t1:.2e} at 6 random (q, qdot) (40 digits, actual N differentiated)"
+                   f"relative residual {res_t1:.2e} at 6 random (q, q_dot) (40 digits, actual N differentiated)"
                    f"{sampler.note()}; brackets.py's hamiltonian_vector_field(H_bar) = -P grad H_bar "
                    f"(dx/dtau = {{H, x}}) gives {res_py:.2e}: in that convention the same flow needs the bracket with "
                    f"the opposite sign ({{q_i, p_j}} = -delta_ij, {{p1, p2}} = -S_bar). Symbolic: {theorem_detail}; "

@@ -83,7 +83,7 @@ def prove_theorem_1(s_bar: str = "N*B", convention: str = "theorem_1") -> tuple[
     what = f"S_bar = {s_bar}, dx/dtau = " + ("{x, H_bar}" if convention == "theorem_1" else "{H_bar, x}")
     if failing:
         return False, f"{what}: not identically equal to the tau-flow in {', '.join(failing)}"
-    return True, (f"{what}: the tau-flow of eq. 2704-7 in (q, p = N dL/dqdot) equals the Hamiltonian field for "
+    return True, (f"{what}: the tau-flow of eq. 2704-7 in (q, p = N dL/dq_dot) equals the Hamiltonian field for "
                   "arbitrary G, w, V, a1, a2, b and every N with dN/dq1 = N A2, dN/dq2 = -N A1 "
                   "(numerators expanded to 0)")
 

@@ -35,12 +35,12 @@ T_LONG_NAME = "physical time t"
 def _describe(system_json: Mapping[str, Any]) -> dict[str, Any]:
     """long_name of every state and derived vector (its meaning, and a derived vector's formula), and
     ``tau``'s (the reduced time's formula and equation); empty where the definition cannot be read. A
-    generalized Chaplygin (Lagrangian) system names its components itself: ``{"q": [names], "qdot"
-    ("q_dot"): [names]}`` under ``components``."""
+    system written by the user (generalized Chaplygin, Lagrangian) names its components itself:
+    ``{"q": [names], "q_dot": [names]}`` under ``components``."""
     if system_json.get("kind") == "generalized_chaplygin":
-        return {"q": "generalized coordinate", "qdot": "generalized velocity",
+        return {"q": "generalized coordinate", "q_dot": "generalized velocity",
                 "components": {"q": list(system_json.get("coordinates") or []),
-                               "qdot": list(system_json.get("velocities") or [])}}
+                               "q_dot": list(system_json.get("velocities") or [])}}
     if system_json.get("kind") == "lagrangian":
         coordinates = [str(c) for c in system_json.get("coordinates") or []]
         return {"q": "generalized coordinate", "q_dot": "generalized velocity",

@@ -139,7 +139,7 @@ def _try(data: LagrangianData, cyclic: tuple[int, ...], points: list[dict[sp.Sym
     L_star = _velocity_polynomial(data.L.xreplace(on), u)
     G = sp.hessian(L_star, u)
     if not any(m is not None and regular(m) for m in (numeric_matrix(G, p) for p in points)):
-        raise _Refused("the reduced Lagrangian L* has a singular kinetic matrix d2L*/dqdot2 at every sample point")
+        raise _Refused("the reduced Lagrangian L* has a singular kinetic matrix d2L*/dq_dot2 at every sample point")
     # S = Σ_α (∂L/∂ṡ_α)|* κ_α, κ_α = ∂β_α1/∂q₂ − ∂β_α2/∂q₁ (eq. 2704-7's right side)
     kappa = [tidy(sp.diff(beta[a, 0], q2) - sp.diff(beta[a, 1], q1)) for a in range(k)]
     S = sp.expand(sum((sp.diff(data.L, v[c]).xreplace(on) * kappa[a] for a, c in enumerate(cyclic)), sp.Integer(0)))

@@ -110,7 +110,7 @@ def check_sample_points(data: LagrangianData, rests: tuple[sp.Expr, ...] = ()) -
     M = mass_matrix(data)
     for j, vj in enumerate(data.v):
         if all(M[j, i] == 0 for i in range(M.shape[1])):
-            raise DataError("L", f"has no kinetic term in {vj}: the row of {vj} in the mass matrix d2L/dqdot2 is "
+            raise DataError("L", f"has no kinetic term in {vj}: the row of {vj} in the mass matrix d2L/dq_dot2 is "
                                  "zero, so M is singular (a coordinate without inertia)")
     points = sample_points(data)
     fields = [("L", M), *((f"constraints[{i}]", data.A[i, :]) for i in range(data.A.shape[0]))]
@@ -134,7 +134,7 @@ def check_sample_points(data: LagrangianData, rests: tuple[sp.Expr, ...] = ()) -
                 raise DataError(f"constraints[{i}]", f"is not homogeneous in the velocities: its term without "
                                                      f"velocities, {sp.sstr(rest)}, is not zero")
     if not any(regular(values["L"]) for _, values in evaluated):
-        raise DataError("L", "the mass matrix d2L/dqdot2 is singular at every sample point (with the parameters' "
+        raise DataError("L", "the mass matrix d2L/dq_dot2 is singular at every sample point (with the parameters' "
                              "values): the accelerations are not determined")
     k = data.A.shape[0]
     if k == 0:

@@ -41,7 +41,7 @@ KIND = "lagrangian"
 #: Suffix of a velocity's name: ``theta`` → ``theta_dot``.
 VELOCITY_SUFFIX = "_dot"
 #: Names a coordinate or parameter may not take (``t`` is the time, which L and constraints may use).
-RESERVED = frozenset({"t", "tau", "N", "q", "qdot", "lam", "lambda_"})
+RESERVED = frozenset({"t", "tau", "N", "q", "q_dot", "qdot", "lam", "lambda_"})
 #: Most coordinates (the symbolic elimination of the multipliers grows quickly with their number).
 MAX_COORDINATES = 8
 #: The fields of the input, in the order they are read.
@@ -177,7 +177,7 @@ def lagrangian_of(text: str, symbols: Mapping[str, sp.Symbol], v: tuple[sp.Symbo
         raise DataError("L", f"has degree {degree} in the velocities (as written); the Lagrange-d'Alembert "
                              "equations here need L at most quadratic in them")
     if degree < 2 or all(sp.diff(L, a, b) == 0 for a in v for b in v):
-        raise DataError("L", "has no kinetic term: the mass matrix d2L/dqdot2 is zero")
+        raise DataError("L", "has no kinetic term: the mass matrix d2L/dq_dot2 is zero")
     return L
 
 

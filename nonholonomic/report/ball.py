@@ -72,10 +72,10 @@ def _ball_theorem_1():
     spec = lf.chaplygin_ball_generalized_chaplygin()
     names = ["theta", "phi", "thetadot", "phidot", "I1", "I2", "I3", "D", "c", "N"]
     sym = declare_symbols(names)
-    parsed = {k: parse_expression(spec[k], sym) for k in ("lagrangian", "a1", "a2", "b")}
+    parsed = {k: parse_expression(spec[k], sym) for k in ("L", "a1", "a2", "b")}
     values = {sym["I1"]: INERTIA[0], sym["I2"]: INERTIA[1], sym["I3"]: INERTIA[2], sym["D"]: D, sym["c"]: 0.35}
     shift = tuple(parse_expression(w, sym) for w in BALL_MONOPOLE_CHART["shift"])
-    result = hamiltonize(parsed["lagrangian"], (sym["theta"], sym["phi"]), (sym["thetadot"], sym["phidot"]),
+    result = hamiltonize(parsed["L"], (sym["theta"], sym["phi"]), (sym["thetadot"], sym["phidot"]),
                          parsed["a1"], parsed["a2"], parsed["b"], None, values,
                          domain=((0.0, np.pi), (0.0, 2 * np.pi)), shift=shift, multiplier_symbol=sym["N"])
     return result, sym, values

@@ -50,9 +50,9 @@ from nonholonomic.refusals import RefusedField
 KIND = "generalized_chaplygin"
 TITLE = "Generalized Chaplygin system with two degrees of freedom, written by the user"
 #: Names a coordinate, velocity or parameter may not take.
-RESERVED = frozenset({"t", "tau", "N", "q", "qdot"})
+RESERVED = frozenset({"t", "tau", "N", "q", "q_dot", "qdot"})
 #: The expression fields, in the order they are parsed.
-EXPRESSION_FIELDS = ("lagrangian", "a1", "a2", "b", "potential")
+EXPRESSION_FIELDS = ("L", "a1", "a2", "b", "potential")
 
 
 def _example() -> dict[str, Any]:
@@ -61,13 +61,13 @@ def _example() -> dict[str, Any]:
     veselova = veselova_generalized_chaplygin()
     return {"kind": KIND, "coordinates": veselova["coordinates"].split(","),
             "velocities": veselova["velocities"].split(","), "parameters": {"I1": 1.0, "I2": 2.0, "I3": 3.5},
-            **{k: veselova[k] for k in ("lagrangian", "a1", "a2", "b")}}
+            **{k: veselova[k] for k in ("L", "a1", "a2", "b")}}
 
 
 #: The Veselova system in Euler angles (eq. 2504-8, ERRATA 2; the worked example of Theorem 1) as a system.
 EXAMPLE: dict[str, Any] = _example()
 #: A job request with it.
-EXAMPLE_JOB: dict[str, Any] = {"system": EXAMPLE, "initial_state": {"q": [0.7, 0.4], "qdot": [0.3, -0.5]},
+EXAMPLE_JOB: dict[str, Any] = {"system": EXAMPLE, "initial_state": {"q": [0.7, 0.4], "q_dot": [0.3, -0.5]},
                                "t_final": 50.0, "samples": 101, "checks": ["integrals", "measure", "bracket"]}
 
 
@@ -122,7 +122,7 @@ def parse_field(field: str, text: str, symbols: dict[str, sp.Symbol], velocities
     except ExpressionError as exc:
         raise DataError(field, str(exc)) from None
     v = [symbols[name] for name in velocities]
-    if field != "lagrangian":
+    if field != "L":
         used = sorted(str(s) for s in expr.free_symbols & set(v))
         if used:
             raise DataError(field, f"may not depend on the velocities ({', '.join(used)}): eq. 2704-7 has "
@@ -135,7 +135,7 @@ def parse_field(field: str, text: str, symbols: dict[str, sp.Symbol], velocities
     if degree > 2:
         raise DataError(field, f"has degree {degree} in the velocities; Theorem 1 needs degree <= 2")
     if degree < 2 or all(sp.diff(expr, a, b) == 0 for a in v for b in v):
-        raise DataError(field, "has no kinetic term: d2L/dqdot2 is zero")
+        raise DataError(field, "has no kinetic term: d2L/dq_dot2 is zero")
     return expr
 
 
@@ -176,7 +176,7 @@ def chaplygin_data(lagrangian: str, coordinates: tuple[str, ...], velocities: tu
     if len(coordinates) != 2 or len(velocities) != 2:
         raise DataError("coordinates" if len(coordinates) != 2 else "velocities", "give exactly two names")
     symbols = declared(coordinates, velocities, parameters)
-    texts = {"lagrangian": lagrangian, "a1": a1, "a2": a2, "b": b, "potential": potential or "0"}
+    texts = {"L": lagrangian, "a1": a1, "a2": a2, "b": b, "potential": potential or "0"}
     parsed = {field: parse_field(field, texts[field], symbols, velocities) for field in EXPRESSION_FIELDS}
     used = set().union(*(expr.free_symbols for expr in parsed.values()))
     for name in parameters:
@@ -185,7 +185,7 @@ def chaplygin_data(lagrangian: str, coordinates: tuple[str, ...], velocities: tu
                                                   "remove it, or use it")
     return ChaplyginData(
         q=(symbols[coordinates[0]], symbols[coordinates[1]]), v=(symbols[velocities[0]], symbols[velocities[1]]),
-        L=parsed["lagrangian"], U=parsed["potential"], a1=parsed["a1"], a2=parsed["a2"], b=parsed["b"],
+        L=parsed["L"], U=parsed["potential"], a1=parsed["a1"], a2=parsed["a2"], b=parsed["b"],
         parameters=tuple(symbols[name] for name in parameters), texts=tuple(texts.items()))
 
 
@@ -241,7 +241,7 @@ def theorem_1(data: ChaplyginData) -> tuple[Any, str]:
         to_bracket_variables=(*data.q, *(N * sp.diff(L, vi) for vi in v)),
         from_bracket_variables=(*data.q, *velocity),
         hamiltonian=result.hamiltonian, time_density=N,
-        formula=f"p = N dL/dqdot, N = {sp.sstr(N)}; d tau = N dt; H_bar(q, p) = E(q, p/N); S_bar = N B = "
+        formula=f"p = N dL/dq_dot, N = {sp.sstr(N)}; d tau = N dt; H_bar(q, p) = E(q, p/N); S_bar = N B = "
                 f"{sp.sstr(result.S_bar)}",
         equation="2704-8, 2704-9",
         proof=(True if symbolic else None,
@@ -272,8 +272,8 @@ def define(data: ChaplyginData, reduce: bool = True) -> MechanicalSystem:
     if form is not None:
         N = form.time_density
         measure = InvariantMeasure(N * (G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0]),
-                                   f"rho(q) det G(q), rho = N = {sp.sstr(N)}, G = d2L/dqdot2 (density for dq dqdot; "
-                                   "rho dP dq of Theorem 1 with dP = det G dqdot)", "2704-8")
+                                   f"rho(q) det G(q), rho = N = {sp.sstr(N)}, G = d2L/dq_dot2 (density for dq dq_dot; "
+                                   "rho dP dq of Theorem 1 with dP = det G dq_dot)", "2704-8")
         reduced = ReducedTime(N, f"d tau = N dt, N = {sp.sstr(N)} (Theorem 1)", "2704-8", "s (times N's unit)")
     else:
         measure = InvariantMeasure(None, f"none claimed: {why}", "2704-7")
@@ -286,14 +286,14 @@ def define(data: ChaplyginData, reduce: bool = True) -> MechanicalSystem:
         equation="2704-7",
         parameters=parameters,
         state=(StateVector("q", q, f"generalized coordinates ({q[0]}, {q[1]})", "as L's coordinates"),
-               StateVector("qdot", v, f"generalized velocities ({v[0]}, {v[1]})", "q's unit/s")),
+               StateVector("q_dot", v, f"generalized velocities ({v[0]}, {v[1]})", "q's unit/s")),
         rhs=(v[0], v[1], *accelerations(data)),
         integrals=(FirstIntegral("energy", energy(data), sp.Abs(T) + sp.Abs(L - T) + sp.Abs(data.U),
-                                 "E = (qdot, dL/dqdot) - L + U", "2704-7"),),
+                                 "E = (q_dot, dL/dq_dot) - L + U", "2704-7"),),
         measure=measure,
         reduced_time=reduced,
         potential_formula=f"U = {texts['potential']}",
-        notes=(f"L = {texts['lagrangian']}", f"S = ({texts['a1']}) {v[0]} + ({texts['a2']}) {v[1]} + ({texts['b']})",
+        notes=(f"L = {texts['L']}", f"S = ({texts['a1']}) {v[0]} + ({texts['a2']}) {v[1]} + ({texts['b']})",
                *([] if form is not None else [f"no Hamiltonian form: {why}"])),
         hamiltonian_form=form,
     )

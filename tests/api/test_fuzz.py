@@ -30,6 +30,8 @@ EXAMPLES = int(os.environ.get("NONHOLONOMIC_FUZZ_EXAMPLES", "60"))
 BUDGET_S_NOTE = ("budget_s is deprecated and ignored: verdicts are bounded by work limits (limits.max_proof_ops, "
                  "limits.max_integrate_ops, limits.max_tidy_ops: sympy operation counts), not seconds, "
                  "so the same body gets the same answer on every machine; it will be removed")
+LAGRANGIAN_NOTE = ("lagrangian is deprecated: it is now L, as for every system written by the user (L, q, q_dot); "
+                   "the old name will no longer be accepted after 2027-06")
 PROBLEM = "application/problem+json"
 #: Seconds an accepted job may run before the fuzzer cancels it (a slow job is not a failure).
 JOB_WAIT_S = 20.0
@@ -224,7 +226,7 @@ def _chaplygin_body(draw: st.DrawFn) -> dict[str, Any]:
     body.update(t_final=draw(st.floats(0.01, 2.0)), samples=draw(st.integers(2, 20)), checks=["integrals"])
     system = body["system"]
     names = system["coordinates"] + system["velocities"] + list(system["parameters"])
-    field = draw(st.sampled_from(["lagrangian", "a1", "a2", "b", "potential", "parameters"]))
+    field = draw(st.sampled_from(["L", "a1", "a2", "b", "potential", "parameters"]))
     if field == "parameters":
         system["parameters"][draw(st.sampled_from(["k", "I1"]))] = draw(NUMBERS)
     else:
@@ -323,7 +325,9 @@ IN_COORDINATES = st.one_of(st.recursive(
 def hamiltonize_bodies(draw: st.DrawFn) -> dict[str, Any]:
     lagrangian = draw(st.sampled_from(["(a**2 + b**2)/2", "(a**2 + (2 + cos(x))*b**2)/2", "a*b + a**2"]))
     body: dict[str, Any] = {"coordinates": ["x", "y"], "velocities": ["a", "b"],
-                            "lagrangian": draw(st.one_of(st.just(lagrangian), st.just(lagrangian), EXPRESSIONS)),
+                            # L, or its former name (still read, with a deprecation note)
+                            draw(st.sampled_from(["L", "lagrangian"])): draw(
+                                st.one_of(st.just(lagrangian), st.just(lagrangian), EXPRESSIONS)),
                             "a1": draw(IN_COORDINATES), "a2": draw(IN_COORDINATES), "b": draw(IN_COORDINATES)}
     _limits_and_budget(draw, body)
     if draw(st.booleans()):
@@ -351,7 +355,9 @@ def test_fuzzed_symbolic_requests_never_give_a_500(fuzz_client, path, bodies):
         assert r.status_code in (200, 422, 503), (r.status_code, r.text, body)
         if r.status_code == 200:
             answer = _strict(r.text)
-            assert answer["deprecations"] == ([BUDGET_S_NOTE] if "budget_s" in body else []), answer["deprecations"]
+            expected = ([BUDGET_S_NOTE] if "budget_s" in body else []) + ([LAGRANGIAN_NOTE] if "lagrangian" in body
+                                                                           else [])
+            assert answer["deprecations"] == expected, answer["deprecations"]
         else:
             _assert_problem(r)
             assert r.status_code == 422 or int(r.headers["retry-after"]) >= 1, r.headers

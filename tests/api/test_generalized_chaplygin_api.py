@@ -11,7 +11,7 @@ from tests.support import poll_job
 
 def test_the_example_job_runs_with_its_hamiltonian_form_page_and_plots(client):
     catalog = client.get("/v1/systems").json()["generalized_chaplygin"]
-    assert catalog["example"] == EXAMPLE_JOB and catalog["state"] == ["q", "qdot"]
+    assert catalog["example"] == EXAMPLE_JOB and catalog["state"] == ["q", "q_dot"]
     r = client.post("/v1/jobs", json=catalog["example"])
     assert r.status_code == 202, r.text
     view = poll_job(client, r.headers["location"])
@@ -39,14 +39,41 @@ def _errors(client, body) -> dict[str, str]:
 
 def test_bad_fields_are_422s_naming_them(client):
     body = copy.deepcopy(EXAMPLE_JOB)
-    body["system"]["lagrangian"] = "thetadot**3"
-    assert "degree 3" in _errors(client, body)["system.lagrangian"]
+    body["system"]["L"] = "thetadot**3"
+    assert "degree 3" in _errors(client, body)["system.L"]
     body = copy.deepcopy(EXAMPLE_JOB)
     body["system"]["a2"] = "I9*phi"
     assert "unknown name 'I9'" in _errors(client, body)["system.a2"]
     body = copy.deepcopy(EXAMPLE_JOB)
-    body["initial_state"] = {"q": [0.0, 0.4], "qdot": [0.1, 0.2]}  # theta = 0: det G = 0
+    body["initial_state"] = {"q": [0.0, 0.4], "q_dot": [0.1, 0.2]}  # theta = 0: det G = 0
     assert "singular" in _errors(client, body)["initial_state.q"]
     body = copy.deepcopy(EXAMPLE_JOB)
-    body["initial_state"] = {"q": [0.7, 0.4], "qdot": [0.1, 0.2, 0.3]}
-    assert "needs 2 components" in _errors(client, body)["initial_state.qdot"]
+    body["initial_state"] = {"q": [0.7, 0.4], "q_dot": [0.1, 0.2, 0.3]}
+    assert "needs 2 components" in _errors(client, body)["initial_state.q_dot"]
+
+
+def test_the_former_names_lagrangian_and_qdot_are_read_with_a_note(client):
+    """One vocabulary (L, q, q_dot) for every system written by the user; the generalized Chaplygin system's
+    former names still work, are stored in the new ones and the answer says so."""
+    old = copy.deepcopy(EXAMPLE_JOB)
+    old["system"]["lagrangian"] = old["system"].pop("L")
+    old["initial_state"]["qdot"] = old["initial_state"].pop("q_dot")
+    r = client.post("/v1/jobs", json=old)
+    assert r.status_code == 202, r.text
+    notes = r.json()["deprecations"]
+    assert len(notes) == 2 and "system.lagrangian is deprecated: it is now system.L" in notes[0]
+    assert "initial_state.qdot is deprecated: it is now initial_state.q_dot" in notes[1]
+    stored = client.get(r.headers["location"], params={"trajectory": "false"}).json()["request"]
+    assert stored["system"]["L"] == EXAMPLE_JOB["system"]["L"] and "lagrangian" not in stored["system"]
+    assert stored["initial_state"] == EXAMPLE_JOB["initial_state"]
+    new = client.post("/v1/jobs", json=EXAMPLE_JOB)
+    assert new.status_code == 202 and new.json()["deprecations"] == []
+    both = copy.deepcopy(EXAMPLE_JOB)
+    both["system"]["lagrangian"] = both["system"]["L"]
+    r = client.post("/v1/jobs", json=both)
+    assert r.status_code == 422 and "send L only" in r.text, r.text
+    hamiltonize = {k: EXAMPLE_JOB["system"][k] for k in ("coordinates", "velocities", "a1", "a2", "b")}
+    answer = client.post("/v1/hamiltonize", json={**hamiltonize, "lagrangian": EXAMPLE_JOB["system"]["L"],
+                                                   "parameters": EXAMPLE_JOB["system"]["parameters"]})
+    assert answer.status_code == 200, answer.text
+    assert any("lagrangian is deprecated: it is now L" in n for n in answer.json()["deprecations"])

@@ -151,7 +151,7 @@ def test_hamiltonize_counts_its_characters_too(client, monkeypatch):
 
     monkeypatch.setenv("NONHOLONOMIC_MAX_SYMBOLIC_CHARACTERS", "50")
     get_settings.cache_clear()
-    body = {"lagrangian": "(q1dot**2 + q2dot**2)/2 + " + "+".join(["q1*q2"] * 10), "coordinates": ["q1", "q2"],
+    body = {"L": "(q1dot**2 + q2dot**2)/2 + " + "+".join(["q1*q2"] * 10), "coordinates": ["q1", "q2"],
             "velocities": ["q1dot", "q2dot"], "a1": "0", "a2": "0", "b": "0"}
     r = client.post("/v1/hamiltonize", json=body)
     assert r.status_code == 422 and _fields(r) == ["body"] and "at most 50" in r.json()["detail"], r.text

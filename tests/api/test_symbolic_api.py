@@ -58,12 +58,12 @@ def test_hamiltonize_worked_examples_find_the_paper_multipliers(client):
 
 
 def test_hamiltonize_refuses_unknown_names_and_non_quadratic_lagrangians(client):
-    base = {"lagrangian": "(q1dot**2 + q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
+    base = {"L": "(q1dot**2 + q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
             "a1": "0", "a2": "0", "b": "sin(q1)"}
     r = client.post("/v1/hamiltonize", json={**base, "b": "sin(q3)"})
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "b"
-    r = client.post("/v1/hamiltonize", json={**base, "lagrangian": "q1dot**4"})
-    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "lagrangian"
+    r = client.post("/v1/hamiltonize", json={**base, "L": "q1dot**4"})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "L"
 
 
 BALL_VALUES = {"I1": 1.0, "I2": 1.4, "I3": 2.1, "D": 0.6}
@@ -106,7 +106,7 @@ def test_hamiltonize_refuses_bad_monopole_charts(client, monopole, field):
 
 
 def test_the_name_n_is_reserved_in_a_shift(client):
-    body = {"lagrangian": "(q1dot**2 + N*q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
+    body = {"L": "(q1dot**2 + N*q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
             "a1": "0", "a2": "0", "b": "sin(q1)", "symbols": ["N"],
             "monopole": {"domain": [["0", "1"], ["0", "1"]], "shift": ["0", "N"]}}
     r = client.post("/v1/hamiltonize", json=body)
@@ -154,7 +154,7 @@ def test_symbolic_work_past_the_safety_cap_is_a_503_not_a_verdict(client, monkey
     example = client.get("/v1/hamiltonize/examples").json()["examples"]["chaplygin_ball"]
     # a Lagrangian scaled by a factor of this run's (the same motion): its proofs are new to every memo on
     # disk, so the ball's work takes its ~4 s again
-    scaled = {**example, "lagrangian": f"{secrets.randbelow(10**9) + 2}*({example['lagrangian']})"}
+    scaled = {**example, "L": f"{secrets.randbelow(10**9) + 2}*({example['L']})"}
     r = client.post("/v1/hamiltonize", json=scaled)
     assert r.status_code == 503 and r.headers["content-type"] == "application/problem+json", r.text
     problem = r.json()
@@ -206,7 +206,7 @@ def test_too_small_limits_leave_the_verdicts_undecided_naming_the_limit(client):
     assert again.json()["jacobi"] == jacobi
     # A = (q1 (q2^2 + 2 q2 + 1), -(q2 + 1)^3/3): closed, but only after expansion (no normal form: max_tidy_ops 0);
     # the density exp(-q1 (q2 + 1)^3/3) comes from sympy's integrate, checked at points, its proof not tried
-    body = {"lagrangian": "(q1dot**2 + q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
+    body = {"L": "(q1dot**2 + q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
             "a1": "q1*(q2**2 + 2*q2 + 1)", "a2": "-(q2 + 1)**3/3", "b": "1"}
     r = client.post("/v1/hamiltonize", json={**body, "limits": {"max_proof_ops": 1, "max_tidy_ops": 0}})
     assert r.status_code == 200, r.text

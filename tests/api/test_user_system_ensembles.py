@@ -114,4 +114,4 @@ def test_sections_keep_each_vectors_own_width_with_rows_and_without(client):
     assert poll_job(client, r.headers["location"], timeout=120.0)["status"] == "succeeded"
     empty = xr.open_dataset(client.get(f"{r.headers['location']}/section", params={"format": "netcdf"}).content,
                             engine="netcdf4").load()
-    assert {"q1", "q2", "qdot1", "qdot2"} <= set(empty.data_vars) and "q3" not in empty
+    assert {"q1", "q2", "q_dot1", "q_dot2"} <= set(empty.data_vars) and "q3" not in empty

@@ -117,12 +117,12 @@ def test_sign_in_a_casimir_is_a_422(client):
     assert "sign() is not smooth" in errors["casimirs.c"]
 
 
-@pytest.mark.parametrize("field", ["a1", "a2", "lagrangian", "potential"])
+@pytest.mark.parametrize("field", ["a1", "a2", "L", "potential"])
 def test_sign_in_hamiltonize_is_a_422(client, field):
     """NameError (DiracDelta, 500) on main for a1."""
-    body = {"lagrangian": "(q1dot**2 + q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
+    body = {"L": "(q1dot**2 + q2dot**2)/2", "coordinates": ["q1", "q2"], "velocities": ["q1dot", "q2dot"],
             "a1": "q2", "a2": "0", "b": "0"}
-    body[field] = "(1 + sign(q1)/2)*(q1dot**2 + q2dot**2)/2" if field == "lagrangian" else "sign(q1 - q2)"
+    body[field] = "(1 + sign(q1)/2)*(q1dot**2 + q2dot**2)/2" if field == "L" else "sign(q1 - q2)"
     assert "sign() is not smooth" in _errors(client.post("/v1/hamiltonize", json=body))[field]
 
 
@@ -157,8 +157,8 @@ def test_the_ends_of_the_tolerance_range_are_accepted(client, tolerance):
 def test_a_parameter_no_expression_uses_is_a_422(client):
     """Accepted on main; every job then failed with heyoka's ValueError (0 parameters in the system)."""
     system = {"kind": "generalized_chaplygin", "coordinates": ["q1", "q2"], "velocities": ["u1", "u2"],
-              "lagrangian": "(u1**2 + u2**2)/2 + k*0", "a1": "q2", "a2": "0", "b": "0", "parameters": {"k": 1.0}}
-    body = {"system": system, "initial_state": {"q": [0.1, 0.2], "qdot": [0.3, 0.1]}, "t_final": 1.0, "samples": 11}
+              "L": "(u1**2 + u2**2)/2 + k*0", "a1": "q2", "a2": "0", "b": "0", "parameters": {"k": 1.0}}
+    body = {"system": system, "initial_state": {"q": [0.1, 0.2], "q_dot": [0.3, 0.1]}, "t_final": 1.0, "samples": 11}
     errors = _errors(client.post("/v1/jobs", json=body))
     assert "not used by any expression" in errors["system.parameters.k"]
 

@@ -173,7 +173,7 @@ def test_cli_systems_lists_the_kinds(base):
     assert done.returncode == 0, done.stderr
     assert "chaplygin_ball" in done.stdout and "M, gamma" in done.stdout
     generalized = [line.split() for line in done.stdout.splitlines() if line.startswith("generalized_chaplygin ")]
-    assert generalized and generalized[0][1:3] == ["q,", "qdot"]  # the user-written kind, its own entry's shape
+    assert generalized and generalized[0][1:3] == ["q,", "q_dot"]  # the user-written kind, its own entry's shape
     raw = _cli(base, "systems", "--json")
     assert raw.returncode == 0 and "chaplygin_ball" in [s["kind"] for s in json.loads(raw.stdout)["systems"]]
 

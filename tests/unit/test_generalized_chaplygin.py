@@ -29,7 +29,7 @@ GAMMA0 = np.array([0.48, 0.6, 0.64])
 
 
 def euler_system(example: dict[str, str], parameters: tuple[str, ...]):
-    return gc.define(gc.chaplygin_data(example["lagrangian"], ("theta", "phi"), ("thetadot", "phidot"),
+    return gc.define(gc.chaplygin_data(example["L"], ("theta", "phi"), ("thetadot", "phidot"),
                                        example["a1"], example["a2"], example["b"], None, parameters))
 
 
@@ -45,7 +45,7 @@ def test_veselova_in_euler_angles_rolls_as_the_vector_kind():
                       {"omega": omega0, "gamma": GAMMA0}, 30.0, 61)
     th, ph, thd, phd, _, _ = euler_angles_and_rates(omega0[None, :], GAMMA0[None, :])
     system = euler_system(veselova_generalized_chaplygin(), ("I1", "I2", "I3"))
-    euler = simulate(system, INERTIA, {"q": [th[0], ph[0]], "qdot": [thd[0], phd[0]]}, 30.0, 61,
+    euler = simulate(system, INERTIA, {"q": [th[0], ph[0]], "q_dot": [thd[0], phd[0]]}, 30.0, 61,
                      checks=["integrals", "measure", "bracket"])
     assert np.max(np.abs(gamma_of(euler.state("q")) - vector.state("gamma"))) < 1e-9
     # Theorem 2: N = (γ, I⁻¹γ)^(-1/2) up to a constant, so τ grows as ∫ N dt along the vector orbit too.
@@ -71,7 +71,7 @@ def test_the_ball_in_euler_angles_rolls_as_the_vector_kind():
     system = euler_system(chaplygin_ball_generalized_chaplygin(), ("D", "I1", "I2", "I3", "c"))
     # The measure's symbolic proof takes ~19 s alone (a large rational function of tan(q/2)): here it
     # is checked pointwise only; a job runs the proof to its end (within the work limits).
-    euler = simulate(system, {**INERTIA, "D": D, "c": c}, {"q": [th[0], ph[0]], "qdot": [thd[0], phd[0]]},
+    euler = simulate(system, {**INERTIA, "D": D, "c": c}, {"q": [th[0], ph[0]], "q_dot": [thd[0], phd[0]]},
                      30.0, 61, checks=["integrals", "bracket"])
     assert abs(c) > 0.1  # a non-trivial gyroscopic term b = -D c sin(theta)/G
     assert np.max(np.abs(gamma_of(euler.state("q")) - vector.state("gamma"))) < 1e-9
@@ -91,7 +91,7 @@ def test_no_multiplier_integrates_in_t_and_says_why():
     system = gc.define(data)
     assert system.reduced_time is None and system.hamiltonian_form is None
     assert "integrability condition" in system.measure.formula
-    result = simulate(system, {"k": 1.0}, {"q": [0.3, 0.1], "qdot": [0.2, -0.4]}, 20.0, 41,
+    result = simulate(system, {"k": 1.0}, {"q": [0.3, 0.1], "q_dot": [0.2, -0.4]}, 20.0, 41,
                       checks=["integrals", "measure", "bracket"])
     assert result.integrals[0].passed and result.integrals[0].max_rel_drift < 1e-12
     assert [c.passed for c in result.checks] == [None, None]
@@ -105,7 +105,7 @@ def test_the_printed_errata_would_be_caught():
     wrong = dict(example, a2="sin(theta)**3*cos(theta)*(I1*sin(phi)**2 + I2*cos(phi)**2)")
     system = euler_system(wrong, ("I1", "I2", "I3"))
     right = euler_system(example, ("I1", "I2", "I3"))
-    state = {"q": [0.9, 0.7], "qdot": [0.3, -0.5]}
+    state = {"q": [0.9, 0.7], "q_dot": [0.3, -0.5]}
     a = simulate(system, INERTIA, state, 30.0, 31, checks=["integrals"])
     b = simulate(right, INERTIA, state, 30.0, 31, checks=["integrals"])
     assert np.max(np.abs(a.state("q") - b.state("q"))) > 1e-2
@@ -125,7 +125,7 @@ def test_a_job_runs_the_example_and_bad_fields_are_named():
             return {str(e["loc"][-1]): e["msg"] for e in exc.errors()}
         return {p.field.split(".", 1)[1]: p.reason for p in request.problems()}  # sympy's, off the event loop
 
-    assert "polynomial of degree <= 2" in problems(lagrangian="sin(thetadot)")["lagrangian"]
+    assert "polynomial of degree <= 2" in problems(L="sin(thetadot)")["L"]
     assert "may not depend on the velocities" in problems(a1="thetadot")["a1"]
     assert "unknown name 'I4'" in problems(b="I4")["b"]
     assert "reserved" in problems(coordinates=["t", "phi"])["coordinates"]
@@ -135,7 +135,8 @@ def test_a_job_runs_the_example_and_bad_fields_are_named():
     assert "not used by any expression" in unused["parameters.k"]  # heyoka refused it when the job ran (issue 19)
 
 
-@pytest.mark.parametrize("state", [{"q": [0.7, 0.4, 0.1], "qdot": [0.3, -0.5]}, {"q": [0.0, 0.4], "qdot": [0.3, 0.1]}])
+@pytest.mark.parametrize("state", [{"q": [0.7, 0.4, 0.1], "q_dot": [0.3, -0.5]},
+                                   {"q": [0.0, 0.4], "q_dot": [0.3, 0.1]}])
 def test_a_bad_initial_state_is_named(state):
     body = copy.deepcopy(gc.EXAMPLE_JOB) | {"initial_state": state}
     found = JobRequest.model_validate(body).problems()

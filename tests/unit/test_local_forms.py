@@ -310,11 +310,11 @@ def parse(text: str, names: set[str]) -> sp.Expr:
 @pytest.mark.parametrize("kind", ["veselova", "chaplygin_ball"])
 def test_theorem_1_examples_are_safe_strings_of_the_tested_forms(kind):
     spec = lf.veselova_generalized_chaplygin() if kind == "veselova" else lf.chaplygin_ball_generalized_chaplygin()
-    assert set(spec) == {"lagrangian", "a1", "a2", "b", "coordinates", "velocities"}
+    assert set(spec) == {"L", "a1", "a2", "b", "coordinates", "velocities"}
     assert spec["coordinates"] == "theta,phi" and spec["velocities"] == "thetadot,phidot"
     names = ({"theta", "phi", "thetadot", "phidot", "I1", "I2", "I3"}
              | ({"D", "c"} if kind == "chaplygin_ball" else set()))
-    L, a1, a2, b = (parse(spec[k], names) for k in ("lagrangian", "a1", "a2", "b"))
+    L, a1, a2, b = (parse(spec[k], names) for k in ("L", "a1", "a2", "b"))
     S = a1 * lf.thetadot + a2 * lf.phidot + b
     g = lf.euler_gamma()
     if kind == "veselova":
