@@ -11,7 +11,7 @@ Chaplygin's ball in a linear field (I = (2, 3, 4.5), D = 0.7, a = (0.3, -0.2, 0.
 
 A. **Cells per second, one process.** The core's map path (:func:`nonholonomic.analysis.chaos_map.run_cells`:
    the cells' indicators in heyoka's batch mode, classification, the integrals' drift, the 1 % recomputed
-   by Benettin's method) and its integration alone (:func:`nonholonomic.analysis.indicators.run_batch`)
+   by Benettin's method) and its integration alone (:func:`nonholonomic.analysis.chaos_map.indicators.run_batch`)
    against the same variational system written by hand in heyoka: ω = I_Q⁻¹ M by Sherman–Morrison,
    Ṁ = M × ω + γ × a, γ̇ = γ × ω (eq. 2604-1), J w by ``hy.diff`` of those, the unit tangent vector and
    the three quadratures of the indicators, the same batch size, tolerance and output grid. Target:
@@ -43,8 +43,8 @@ import numpy as np  # noqa: E402
 from nonholonomic import get_system  # noqa: E402
 from nonholonomic.analysis import indicators  # noqa: E402
 from nonholonomic.analysis.chaos_map import MapOptions, run_cells  # noqa: E402
+from nonholonomic.analysis.chaos_map.grid import Grid, complete, default_ranges  # noqa: E402
 from nonholonomic.analysis.ensemble import Member  # noqa: E402
-from nonholonomic.analysis.grid import Grid, complete, default_ranges  # noqa: E402
 from nonholonomic.kernels import parameter_vector  # noqa: E402
 
 INERTIA = (2.0, 3.0, 4.5)

@@ -12,7 +12,7 @@ A. **The core**: :func:`nonholonomic.analysis.periodic_orbit.find_periodic_orbit
    the crossings, the independent DOP853 integration, the multipliers).
 B. **The reference**: ``scipy.optimize.root(method="hybr")`` (MINPACK's Powell hybrid method, its own
    finite-difference Jacobian) on F(z) = P^k(z) - z in the chart, z → the state by the grid's completion
-   (:func:`nonholonomic.analysis.grid.complete`), P by heyoka's events
+   (:func:`nonholonomic.analysis.chaos_map.grid.complete`), P by heyoka's events
    (:func:`~nonholonomic.analysis.poincare.section`); then the same closing error max|x(T) - x0|
    measured by the core's integrator.
 
@@ -31,7 +31,7 @@ import time
 import numpy as np
 from scipy.optimize import root
 
-from nonholonomic.analysis.grid import Grid, complete
+from nonholonomic.analysis.chaos_map.grid import Grid, complete
 from nonholonomic.analysis.periodic_orbit import find_periodic_orbit
 from nonholonomic.analysis.poincare import section
 from nonholonomic.integration import integrate

@@ -8,7 +8,7 @@ Run from the repository root (~1 min on 2 cores, the core only, no service)::
 1. **The layer.** States on the symmetric line ω2 = 0, a > 0, of study 1's section (x2 = 0, level
    H = 0.5, K = 2; ``science_geometry.jacobi_state``) at θ* + d, θ* = −0.33591693492 the separatrix found
    by study 1's bisection, d from −2e-3 to 2e-3 in steps of 1e-4; MEGNO ⟨Y⟩, FLI and the finite-time
-   exponent at t = 2e4 (:mod:`nonholonomic.analysis.indicators`, one batch integration each).
+   exponent at t = 2e4 (:mod:`nonholonomic.analysis.chaos_map.indicators`, one batch integration each).
 2. **The ball's control.** Chaplygin's ball, U = 0, (H, c) = (2, 0), on the line γ = e2 (φ = π/2) of
    study 1's ball section, at M3* + d with M3* the separatrix: on γ = e2 the level set meets the
    separatrix of the unstable rotation about the middle axis, F = (M, M) = 2H (I2 + D) = 14.8, where

@@ -293,11 +293,11 @@ class MechanicalSystem:
     constraints: tuple[StateConstraint, ...] = ()
     notes: tuple[str, ...] = field(default=())
     hamiltonian_form: Any = field(default=None, compare=False)
+    """A Hamiltonian form after a time substitution that comes with the definition (Theorem 1's for a
+    user's generalized Chaplygin system), a :class:`nonholonomic.hamiltonization.HamiltonianForm`."""
     structure: Any = field(default=None, compare=False)
     """What a structure search found for a user's system (a JSON-able mapping: the measure verdict, the
     integrals in an ansatz, the Hamiltonization), shown with the job's result; None for the paper's kinds."""
-    """A Hamiltonian form after a time substitution that comes with the definition (Theorem 1's for a
-    user's generalized Chaplygin system), a :class:`nonholonomic.hamiltonization.HamiltonianForm`."""
 
     @property
     def state_symbols(self) -> tuple[sp.Symbol, ...]:

@@ -26,8 +26,8 @@ from nonholonomic.structure import bracket_evidence, euler_angle_evidence, struc
 
 if TYPE_CHECKING:
     from nonholonomic.analysis.lyapunov import Spectrum
-    from nonholonomic.analysis.periodic_continuation import Branch
     from nonholonomic.analysis.periodic_orbit import PeriodicOrbit
+    from nonholonomic.analysis.periodic_orbit.continuation import Branch
     from nonholonomic.analysis.poincare import Section
 
 #: Evidence a simulation can compute (``bracket``, ``euler_angles`` and ``isomorphisms`` only for some kinds, see

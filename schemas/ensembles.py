@@ -1,9 +1,10 @@
 """Ensemble requests (``POST /v1/ensembles``): one system, many members, the same evidence for each.
 
 Members come from an explicit list of initial states, from ``sample`` (states on a level set of the
-kind's integrals, drawn with a seed) or from a one-parameter ``sweep``. :meth:`EnsembleRequest.members`
-turns the request into the core's :class:`~nonholonomic.analysis.ensemble.Member` list, the same in the
-API (validation) and in every worker (each chunk rebuilds it), so a chunk needs only its range.
+kind's integrals, drawn with a seed), from a one-parameter ``sweep`` or from a chaos map's ``grid`` (a
+section plane's cells completed to states on a level). :meth:`EnsembleRequest.members_list` turns the
+request into the core's :class:`~nonholonomic.analysis.ensemble.Member` list, the same in the API
+(validation) and in every worker (each chunk rebuilds it), so a chunk needs only its range.
 """
 
 from __future__ import annotations
@@ -23,9 +24,9 @@ from pydantic import (
 )
 
 from nonholonomic.analysis.chaos_map import MapOptions
+from nonholonomic.analysis.chaos_map.grid import Grid, GridError, complete, default_ranges, plan as plan_grid
+from nonholonomic.analysis.chaos_map.indicators import thresholds_for
 from nonholonomic.analysis.ensemble import Member, default_chunk_size, plan
-from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges, plan as plan_grid
-from nonholonomic.analysis.indicators import thresholds_for
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem, project_initial_state
 from nonholonomic.kernels import parameter_vector, state_vector
@@ -66,7 +67,7 @@ class SweepMembers(BaseModel):
 class GridMembers(BaseModel):
     """A chaos map's cells: a ``shape[0]`` × ``shape[1]`` grid on the section ``surface = value`` in two
     state components, each cell's centre completed to a state on ``level`` that crosses the section in
-    ``direction`` (:mod:`nonholonomic.analysis.grid`). Cell ``k = i · shape[1] + j``."""
+    ``direction`` (:mod:`nonholonomic.analysis.chaos_map.grid`). Cell ``k = i · shape[1] + j``."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -348,7 +349,7 @@ class EnsembleRequest(BaseModel):
         Raises
         ------
         LevelProblem
-            If the grid cannot be built (:class:`~nonholonomic.analysis.grid.GridError`).
+            If the grid cannot be built (:class:`~nonholonomic.analysis.chaos_map.grid.GridError`).
         """
         members = self.members.grid
         assert members is not None  # a chaos map's: members.grid is given

@@ -1,6 +1,6 @@
 """The section explorer's requests (``/v1/explore``): a system, a section plane on a level, a clicked point.
 
-A click is one cell of a 1 × 1 grid (:mod:`nonholonomic.analysis.grid`): the point's two coordinates
+A click is one cell of a 1 × 1 grid (:mod:`nonholonomic.analysis.chaos_map.grid`): the point's two coordinates
 and the section's value fix three components, the system's constraints and the level the rest.
 """
 
@@ -11,7 +11,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges, plan
+from nonholonomic.analysis.chaos_map.grid import Grid, GridError, complete, default_ranges, plan
 from nonholonomic.analysis.periodic_orbit import MAX_PERIOD
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem
@@ -100,8 +100,8 @@ def plane_problems(request: ExplorePlaneRequest) -> tuple[MechanicalSystem | Non
 
 def plane_ranges(system: MechanicalSystem, p: np.ndarray,
                  section: ExploreSection) -> tuple[list[list[float]] | None, list[FieldProblem]]:
-    """The region the level allows in the plane's coordinates (:func:`~nonholonomic.analysis.grid.default_ranges`),
-    or the problem (a level with no state)."""
+    """The region the level allows in the plane's coordinates
+    (:func:`~nonholonomic.analysis.chaos_map.grid.default_ranges`), or the problem (a level with no state)."""
     try:
         return [list(r) for r in default_ranges(system, p, section.grid())], []
     except GridError as exc:

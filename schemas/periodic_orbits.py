@@ -215,7 +215,7 @@ def orbit_to_json(system: MechanicalSystem, orbit: Any) -> dict[str, Any]:
 
 
 def branch_to_json(system: MechanicalSystem, branch: Any) -> dict[str, Any]:
-    """A :class:`~nonholonomic.analysis.periodic_continuation.Branch` as JSON."""
+    """A :class:`~nonholonomic.analysis.periodic_orbit.continuation.Branch` as JSON."""
     points = []
     for value, orbit in zip(branch.values, branch.orbits):
         decided = [c.passed for c in orbit.checks if c.passed is not None]

@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 
 from nonholonomic.analysis.chaos_map import map_summary
+from nonholonomic.analysis.chaos_map.indicators import thresholds_for
 from nonholonomic.analysis.ensemble import summarize
-from nonholonomic.analysis.indicators import thresholds_for
 from schemas.results import system_units
 from schemas.systems import definition_of
 from service.exports import point_array, section_columns, vector_widths

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from nonholonomic.analysis.grid import Grid, GridError, plan
+from nonholonomic.analysis.chaos_map.grid import Grid, GridError, plan
 from nonholonomic.analysis.periodic_orbit import crossing_states
 from nonholonomic.analysis.poincare import section
 from nonholonomic.analysis.sampling import RECIPES, fixable

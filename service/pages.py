@@ -11,7 +11,7 @@ from typing import Any
 from jinja2 import Environment, PackageLoader, select_autoescape
 
 import nonholonomic
-from nonholonomic.analysis.lyapunov_result import CONVERGENCE_WARNING
+from nonholonomic.analysis.lyapunov.result import CONVERGENCE_WARNING
 
 #: Seconds between reloads of a page whose job or ensemble is queued or running.
 REFRESH_S = 2

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from nonholonomic.analysis.periodic_newton import CLOSING_TOLERANCE
+from nonholonomic.analysis.periodic_orbit.newton import CLOSING_TOLERANCE
 from service.plots import PlotUnavailable, _headline, _new_figure
 
 EVENT_COLOURS = {"fold": "C1", "period_doubling": "C3", "lost": "0.4"}

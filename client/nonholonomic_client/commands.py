@@ -1,7 +1,9 @@
-"""The client-side commands of ``nonholonomic``: ``systems``, ``run``, ``ensemble``, ``report``.
+"""The client-side commands of ``nonholonomic``: ``systems``, ``run``, ``ensemble``, ``report`` (``serve``
+and ``worker`` start the server's processes: :mod:`nonholonomic_client.processes`).
 
 Each takes the parsed arguments and returns an exit code; errors are raised (:class:`UsageError`,
-:class:`client.ApiError`) and turned into messages and exit codes by :func:`client.cli.main`.
+:class:`nonholonomic_client.errors.ApiError`) and turned into messages and exit codes by
+:func:`nonholonomic_client.cli.main`.
 """
 
 from __future__ import annotations

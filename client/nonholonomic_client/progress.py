@@ -39,7 +39,8 @@ def render_bar(fraction: float, status: str, elapsed: float | None = None, width
 
 
 class ProgressBar:
-    """A callable ``progress(fraction, status)`` for :meth:`client.Client.wait` that draws a bar.
+    """A callable ``progress(fraction, status)`` for :meth:`nonholonomic_client.Client.wait` (and
+    ``wait_ensemble``) that draws a bar.
 
     On a terminal the bar is redrawn in place with ``\\r``; on anything else (a log file, a pipe)
     it writes one line each time the progress reaches a new tenth or the status changes.

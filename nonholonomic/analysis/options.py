@@ -101,7 +101,7 @@ class SpectrumOptions:
 class PeriodicOrbitOptions:
     """A periodic orbit of the ``period``-th return map to ``surface = value``, seeded by the job's initial state
     (:mod:`.periodic_orbit`), and its continuation through ``sweep_vectors`` (one parameter vector per value of
-    ``sweep_parameter``, :mod:`.periodic_continuation`)."""
+    ``sweep_parameter``, :mod:`nonholonomic.analysis.periodic_orbit.continuation`)."""
 
     surface: str
     value: float = 0.0
@@ -115,10 +115,10 @@ class PeriodicOrbitOptions:
 
     def run(self, system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, t_final: float, *,
             tolerance: float | None = None, progress: ProgressCallback | None = None) -> tuple[Any, Any]:
-        """The orbit and, with a sweep, its :class:`~.periodic_continuation.Branch` (None without one, or when
-        the orbit was not closed: there is nothing to continue)."""
-        from nonholonomic.analysis.periodic_continuation import continue_orbit
+        """The orbit and, with a sweep, its :class:`~nonholonomic.analysis.periodic_orbit.continuation.Branch`
+        (None without one, or when the orbit was not closed: there is nothing to continue)."""
         from nonholonomic.analysis.periodic_orbit import find_periodic_orbit
+        from nonholonomic.analysis.periodic_orbit.continuation import continue_orbit
         from nonholonomic.integration import MACHINE_EPSILON
 
         share = 1.0 / (1 + bool(self.sweep_values))

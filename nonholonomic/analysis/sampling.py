@@ -298,10 +298,7 @@ def fixable(system: MechanicalSystem) -> tuple[str, ...]:
     Chaplygin's ball with the Veselova constraint: energy and (γ, E); Neumann and Clebsch: energy and
     the area (s, L); Veselova, the rubber ball and eq. (2504-12) on e(3): the energy.
 
-    Raises
-    ------
-    KeyError
-        If the kind has no sampling recipe.
+    A kind without a recipe (a system written by the user) has none: ``()``.
     """
     if system.kind not in RECIPES:
         return ()

@@ -1,5 +1,5 @@
-"""Chaos maps' core: the grid's cells completed to states on the level (:mod:`nonholonomic.analysis.grid`)
-and the indicators from one integration of the tangent flow (:mod:`nonholonomic.analysis.indicators`),
+"""Chaos maps' core: the grid's cells completed to states on the level (:mod:`nonholonomic.analysis.chaos_map.grid`)
+and the indicators from one integration of the tangent flow (:mod:`nonholonomic.analysis.chaos_map.indicators`),
 checked against independent computations."""
 
 from __future__ import annotations
@@ -11,17 +11,17 @@ import heyoka as hy
 import numpy as np
 import pytest
 
-from nonholonomic.analysis import indicators
 from nonholonomic.analysis.chaos_map import (
     CHECK_FRACTION,
     MapOptions,
     cell_digest,
     checked_cells,
+    indicators,
     map_summary,
     run_cells,
 )
+from nonholonomic.analysis.chaos_map.grid import Grid, GridError, complete, default_ranges, plan
 from nonholonomic.analysis.ensemble import Member
-from nonholonomic.analysis.grid import Grid, GridError, complete, default_ranges, plan
 from nonholonomic.kernels import numeric, parameter_vector
 from nonholonomic.systems import get_system
 from tests.unit.test_sampling import assert_on_level
@@ -123,7 +123,7 @@ def test_in_the_linear_field_megno_grows_like_half_the_exponent_times_t_and_matc
     """Chaotic cells: <Y> ~ lambda T / 2 (Cincotta & Simo 2000). The finite-time exponent ln|w(T)|/T equals
     ln|Phi(T) w(0)|/T with Phi the whole tangent matrix of hy.var_ode_sys (other equations, integrated apart)
     to 1e-8 at T = 100, before the roundoff amplified by e^(lambda T) moves the orbit itself."""
-    from nonholonomic.analysis.lyapunov_variational import initial_frame, variational_template
+    from nonholonomic.analysis.lyapunov.variational import initial_frame, variational_template
 
     system, p, X = _cells("linear", (8, 8))
     T = 100.0

@@ -1,5 +1,5 @@
 """Periodic orbits of the section map (:mod:`nonholonomic.analysis.periodic_orbit`) and their continuation
-(:mod:`nonholonomic.analysis.periodic_continuation`), checked against independent computations: the
+(:mod:`nonholonomic.analysis.periodic_orbit.continuation`), checked against independent computations: the
 closing error by a second integrator, the multipliers by a finite-difference Jacobian of the return
 map (events only, no variational equations), Liouville's det Φ = ρ(x₀)/ρ(x(T))."""
 
@@ -10,9 +10,9 @@ from functools import cache
 import numpy as np
 import pytest
 
-from nonholonomic.analysis.grid import Grid, complete
-from nonholonomic.analysis.periodic_continuation import characteristic_signs, continue_orbit
+from nonholonomic.analysis.chaos_map.grid import Grid, complete
 from nonholonomic.analysis.periodic_orbit import PeriodicOrbitError, find_periodic_orbit
+from nonholonomic.analysis.periodic_orbit.continuation import characteristic_signs, continue_orbit
 from nonholonomic.analysis.poincare import section
 from nonholonomic.integration import integrate
 from nonholonomic.kernels import numeric, parameter_vector

@@ -7,9 +7,9 @@ import pickle
 
 import pytest
 
-from nonholonomic.analysis.grid import GridError
+from nonholonomic.analysis.chaos_map.grid import GridError
 from nonholonomic.analysis.periodic_orbit import PeriodicOrbitError
-from nonholonomic.analysis.poincare_surface import SurfaceError
+from nonholonomic.analysis.poincare.surface import SurfaceError
 from nonholonomic.analysis.sampling import LevelError
 from nonholonomic.isomorphisms import MapInputError
 from nonholonomic.lagrangian.parse import DataError as LagrangianDataError

@@ -11,7 +11,7 @@ import sympy as sp
 
 from nonholonomic import get_system
 from nonholonomic.analysis.poincare import section
-from nonholonomic.analysis.poincare_surface import _surface_kernels, parse_surface
+from nonholonomic.analysis.poincare.surface import _surface_kernels, parse_surface
 from nonholonomic.integration import IntegrationError, Trajectory, integrate
 from nonholonomic.integration_batch import integrate_batch
 from nonholonomic.kernels import parameter_vector

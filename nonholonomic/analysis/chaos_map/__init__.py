@@ -1,9 +1,9 @@
-"""Chaos-indicator maps: every cell of a section grid (:mod:`nonholonomic.analysis.grid`) integrated with
-its tangent flow (:mod:`nonholonomic.analysis.indicators`), classified, and a random sample of cells
+"""Chaos-indicator maps: every cell of a section grid (:mod:`nonholonomic.analysis.chaos_map.grid`) integrated with
+its tangent flow (:mod:`nonholonomic.analysis.chaos_map.indicators`), classified, and a random sample of cells
 recomputed independently.
 
 A cell's ``status`` is ``regular`` or ``chaotic`` by the first requested indicator against its
-threshold (:func:`~nonholonomic.analysis.indicators.default_thresholds`), ``outside`` where no state of
+threshold (:func:`~nonholonomic.analysis.chaos_map.indicators.default_thresholds`), ``outside`` where no state of
 the level crosses the section there, ``failed`` where the integration failed. A seeded random
 :data:`CHECK_FRACTION` of the cells (at least one) is recomputed by Benettin's method, the job's
 ``lyapunov`` spectrum (the whole tangent matrix from ``hy.var_ode_sys``, QR every T/100, one scalar
@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from nonholonomic.analysis import indicators
+from nonholonomic.analysis.chaos_map import indicators
 from nonholonomic.analysis.ensemble import Member
 from nonholonomic.analysis.lyapunov import spectrum
 from nonholonomic.definition import MechanicalSystem

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import heyoka as hy
 import numpy as np
 
-from nonholonomic.analysis.lyapunov_zeros import ExpectedZero, expected_zeros
+from nonholonomic.analysis.lyapunov.zeros import ExpectedZero, expected_zeros
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.kernels import numeric
 

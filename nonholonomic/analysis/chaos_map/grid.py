@@ -34,8 +34,8 @@ from itertools import product
 
 import numpy as np
 
-from nonholonomic.analysis.grid_velocity import VelocityError, quadratic_roots, velocities
-from nonholonomic.analysis.poincare_surface import SurfaceError, parse_surface
+from nonholonomic.analysis.chaos_map.grid_velocity import VelocityError, quadratic_roots, velocities
+from nonholonomic.analysis.poincare.surface import SurfaceError, parse_surface
 from nonholonomic.analysis.sampling import RECIPES, LevelError, fixable, on_level, verified
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import vector_slice

@@ -3,7 +3,7 @@
 :func:`find_periodic_orbit` takes a seed state, integrates it to its first crossing of the section
 ``S(x) = value`` (in ``direction``) and to its k-th return after that (heyoka events, :mod:`.poincare`),
 and hands the crossing state and the return time to Newton's method on the closing equations with the
-monodromy from the variational equations (:mod:`.periodic_newton`; Levenberg–Marquardt when Newton
+monodromy from the variational equations (:mod:`.newton`; Levenberg–Marquardt when Newton
 wanders). The search stays on the seed's level: the integrals named in ``level`` (by default those the
 kind's level sets are drawn on, :func:`nonholonomic.analysis.sampling.fixable`; every integral for a
 system without a recipe) and the constraints keep their seed values.
@@ -35,7 +35,7 @@ from typing import TypedDict
 
 import numpy as np
 
-from nonholonomic.analysis.periodic_newton import (
+from nonholonomic.analysis.periodic_orbit.newton import (
     CLOSING_TOLERANCE,
     FALLBACK_EVALUATIONS,
     NEWTON_ITERATIONS,
@@ -48,8 +48,8 @@ from nonholonomic.analysis.periodic_newton import (
     solve,
 )
 from nonholonomic.analysis.poincare import Section, section
-from nonholonomic.analysis.poincare_request import _validate
-from nonholonomic.analysis.poincare_surface import SurfaceError
+from nonholonomic.analysis.poincare.request import _validate
+from nonholonomic.analysis.poincare.surface import SurfaceError
 from nonholonomic.analysis.sampling import fixable
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE, IntegrationError, integrate

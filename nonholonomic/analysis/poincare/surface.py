@@ -9,7 +9,7 @@ every surface is a function of the integrated variables. A refused request field
 
 One heyoka compiled function (the Newton step onto the surface, the flow, ``S``, the derived
 vectors, the first integrals and their scales, translated as the integrator's right-hand side is)
-serves the post-processing of :mod:`.poincare_result`, all the points in one call;
+serves the post-processing of :mod:`.result`, all the points in one call;
 the surface's scale is :func:`surface_scale_of`. Part of :mod:`.poincare` (the front door), where
 every name is importable.
 """

@@ -29,11 +29,11 @@ Structure reported beside the exponents:
 Layout: this module is the front door (:func:`spectrum`, :func:`largest_batch`: the QR loop, scalar
 and batch, with its inputs' validation); every name below is importable from here.
 
-* :mod:`.lyapunov_variational`: the tangent flow heyoka derives, its compiled integrators, the
+* :mod:`.variational`: the tangent flow heyoka derives, its compiled integrators, the
   initial frame, the QR times and one QR step;
-* :mod:`.lyapunov_zeros`: the exponents that must vanish and why (:class:`ExpectedZero`,
+* :mod:`.zeros`: the exponents that must vanish and why (:class:`ExpectedZero`,
   :func:`expected_zeros`, :func:`reversing_involution`);
-* :mod:`.lyapunov_result`: the :class:`Spectrum`, its running estimates (convergence) and the
+* :mod:`.result`: the :class:`Spectrum`, its running estimates (convergence) and the
   checks of its sum.
 """
 
@@ -46,7 +46,7 @@ from dataclasses import replace
 import heyoka as hy
 import numpy as np
 
-from nonholonomic.analysis.lyapunov_result import (
+from nonholonomic.analysis.lyapunov.result import (
     CONVERGENCE_WARNING,
     MAX_CONVERGENCE_ROWS,
     MEASURE_TOLERANCE,
@@ -55,7 +55,7 @@ from nonholonomic.analysis.lyapunov_result import (
     _Accumulator,
     _finish,
 )
-from nonholonomic.analysis.lyapunov_variational import (
+from nonholonomic.analysis.lyapunov.variational import (
     FRAME_SEED,
     _integrator,
     _qr_times,
@@ -65,7 +65,7 @@ from nonholonomic.analysis.lyapunov_variational import (
     variational_equations,
     variational_template,
 )
-from nonholonomic.analysis.lyapunov_zeros import (
+from nonholonomic.analysis.lyapunov.zeros import (
     LIE_TOLERANCE,
     RANK_TOLERANCE,
     ExpectedZero,

@@ -18,7 +18,7 @@ integrator serves every level; it is compiled once per (system, surface, directi
 and process, and copied once per thread.
 
 The event time reaches Python rounded to a double; one Newton step along the flow moves each
-crossing back onto the surface (:mod:`.poincare_result`, where the step and its bounds are described).
+crossing back onto the surface (:mod:`.result`, where the step and its bounds are described).
 
 ``max_points`` stops the integration: the trajectory is propagated in segments of a number of
 steps (:func:`section`: 64 first when there is a ``progress`` to ask, else as many as ``max_points``
@@ -38,13 +38,13 @@ at the points against the initial state, normalised as in :mod:`nonholonomic.evi
 Layout: this module is the front door (:func:`section`, :func:`section_batch`: the segment loop,
 scalar and batch, with its segment lengths and stall checks); every name below is importable from here.
 
-* :mod:`.poincare_surface`: parsing a surface (:func:`parse_surface`, :class:`SurfaceError`), its
+* :mod:`.surface`: parsing a surface (:func:`parse_surface`, :class:`SurfaceError`), its
   names and its compiled kernels, :func:`surface_scale_of`;
-* :mod:`.poincare_request`: the checks of a request's fields (:data:`DIRECTIONS`,
+* :mod:`.request`: the checks of a request's fields (:data:`DIRECTIONS`,
   :data:`MAX_POINTS_LIMIT`);
-* :mod:`.poincare_events`: the compiled integrators with the event, once per process and copied
+* :mod:`.events`: the compiled integrators with the event, once per process and copied
   once per thread, and the callbacks that record the crossings;
-* :mod:`.poincare_result`: the :class:`Section` and the post-processing (the Newton step onto the
+* :mod:`.result`: the :class:`Section` and the post-processing (the Newton step onto the
   surface, points, coordinates, residual, drift).
 """
 
@@ -57,16 +57,16 @@ from collections.abc import Sequence
 import heyoka as hy
 import numpy as np
 
-from nonholonomic.analysis.poincare_events import _BatchCrossings, _Crossings, _integrator
-from nonholonomic.analysis.poincare_request import (
+from nonholonomic.analysis.poincare.events import _BatchCrossings, _Crossings, _integrator
+from nonholonomic.analysis.poincare.request import (
     DIRECTIONS,
     MAX_POINTS_LIMIT,
     _check_arrays,
     _Request,
     _validate,
 )
-from nonholonomic.analysis.poincare_result import NEWTON_BOUND, Section, _finish  # noqa: F401 (NEWTON_BOUND: re-exported)
-from nonholonomic.analysis.poincare_surface import (
+from nonholonomic.analysis.poincare.result import NEWTON_BOUND, Section, _finish  # noqa: F401 (NEWTON_BOUND: re-exported)
+from nonholonomic.analysis.poincare.surface import (
     SurfaceError,
     default_coordinates,
     parse_surface,

@@ -13,7 +13,7 @@ overdetermined but consistent, and its Jacobian
 
 has full column rank at an isolated orbit; Φ(T) = ∂x(T)/∂x₀ is the monodromy, integrated with the
 state from the variational equations (``hy.var_ode_sys`` of the one definition,
-:func:`nonholonomic.analysis.lyapunov_variational.variational_equations`). The Gauss–Newton step is
+:func:`nonholonomic.analysis.lyapunov.variational.variational_equations`). The Gauss–Newton step is
 the least-squares solution of ``J Δ = −R``; it converges quadratically at an isolated orbit and, with
 its minimum-norm steps, onto a point of a family of periodic orbits where J is rank-deficient (a
 resonant torus of an integrable system). The rows after the first n are scaled to unit gradient, so
@@ -35,8 +35,8 @@ import heyoka as hy
 import numpy as np
 import sympy as sp
 
-from nonholonomic.analysis.lyapunov_variational import _integrator
-from nonholonomic.analysis.poincare_surface import parse_surface
+from nonholonomic.analysis.lyapunov.variational import _integrator
+from nonholonomic.analysis.poincare.surface import parse_surface
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.integration import IntegrationCancelled, IntegrationError
 from nonholonomic.kernels import VectorKernel, numeric, vectorize

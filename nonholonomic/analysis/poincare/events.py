@@ -22,7 +22,7 @@ import heyoka as hy
 import numpy as np
 import sympy as sp
 
-from nonholonomic.analysis.poincare_surface import _heyoka_ready, _Prepared
+from nonholonomic.analysis.poincare.surface import _heyoka_ready, _Prepared
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.taylor import taylor_system
 

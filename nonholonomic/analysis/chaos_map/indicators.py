@@ -28,7 +28,7 @@ from functools import lru_cache
 import heyoka as hy
 import numpy as np
 
-from nonholonomic.analysis.lyapunov_variational import initial_frame, thread_copy
+from nonholonomic.analysis.lyapunov.variational import initial_frame, thread_copy
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import integral_tolerance
 from nonholonomic.integration import MACHINE_EPSILON, IntegrationCancelled, IntegrationError, ProgressCallback

@@ -86,7 +86,7 @@ T = TypeVar("T")
 def thread_copy(key: tuple[object, ...], template: Callable[[], T]) -> T:
     """This thread's own copy of a compiled integrator (``template()`` deep-copied on first use; the last
     :data:`THREAD_COPIES` kept, least recently used dropped first). Shared by the tangent flows here and
-    the chaos indicators' (:mod:`nonholonomic.analysis.indicators`)."""
+    the chaos indicators' (:mod:`nonholonomic.analysis.chaos_map.indicators`)."""
     cache: OrderedDict[tuple[object, ...], object] = _per_thread.__dict__.setdefault("cache", OrderedDict())
     if key not in cache:
         cache[key] = copy.deepcopy(template())

@@ -8,7 +8,7 @@ back onto the surface (``δ`` is accepted only while it is at the level of that 
 nearly tangent crossing keeps its unrefined point and a warning says so).
 
 Measures reported per section: the largest ``|S(x) − value|`` at the points relative to the
-surface's scale (:func:`.poincare_surface.surface_scale_of`), and the largest relative drift of
+surface's scale (:func:`.surface.surface_scale_of`), and the largest relative drift of
 every first integral at the points against the initial state, normalised as in
 :mod:`nonholonomic.evidence.integrals`. Part of :mod:`.poincare` (the front door), where every
 name is importable.
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nonholonomic.analysis.poincare_request import _Request
-from nonholonomic.analysis.poincare_surface import _scale
+from nonholonomic.analysis.poincare.request import _Request
+from nonholonomic.analysis.poincare.surface import _scale
 from nonholonomic.integration import MACHINE_EPSILON
 
 #: The Newton correction of a crossing time is accepted up to this many ``eps·max(|t|, h_max)``.

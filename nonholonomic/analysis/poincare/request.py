@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy as sp
 
-from nonholonomic.analysis.poincare_surface import SurfaceError, _prepare, _Prepared
+from nonholonomic.analysis.poincare.surface import SurfaceError, _prepare, _Prepared
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.integration import MACHINE_EPSILON
 

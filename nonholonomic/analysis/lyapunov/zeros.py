@@ -17,7 +17,7 @@ from functools import lru_cache
 import numpy as np
 import sympy as sp
 
-from nonholonomic.analysis.lyapunov_variational import FRAME_SEED
+from nonholonomic.analysis.lyapunov.variational import FRAME_SEED
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.kernels import VectorKernel, numeric, vectorize
 
