@@ -45,7 +45,7 @@ from nonholonomic.analysis import indicators  # noqa: E402
 from nonholonomic.analysis.chaos_map import MapOptions, run_cells  # noqa: E402
 from nonholonomic.analysis.chaos_map.grid import Grid, complete, default_ranges  # noqa: E402
 from nonholonomic.analysis.ensemble import Member  # noqa: E402
-from nonholonomic.kernels import parameter_vector  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector  # noqa: E402
 
 INERTIA = (2.0, 3.0, 4.5)
 D = 0.7

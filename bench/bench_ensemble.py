@@ -9,7 +9,7 @@ Workload: 1000 trajectories of Chaplygin's ball (U = 0, I = (2, 3, 4.5), D = 0.7
 11 samples, from random states (γ uniform on |γ| = 1, M in a random direction scaled to H = 1;
 seed 7). Measured in one process, trajectories per second:
 
-A. the core as an ensemble chunk runs it, :func:`nonholonomic.integration_batch.integrate_batch`
+A. the core as an ensemble chunk runs it, :func:`nonholonomic.numerics.integration_batch.integrate_batch`
    (heyoka batch mode, ``hy.recommended_simd_size()`` lanes, the right-hand side generated from the
    sympy definition, tolerance = machine epsilon; samples, τ and the states at
    :data:`~nonholonomic.analysis.ensemble.CHECK_POINTS` equally spaced times, all from one
@@ -23,7 +23,7 @@ B. heyoka written by hand in batch mode, as an expert would (:func:`ball_equatio
    literal ``hy.from_sympy`` transcription's, what the core generated before). B′, for information:
    the same with A-steps' step log (heyoka calls a Python step callback at every step, the GIL taken
    again each time: the cost of the step states to anyone);
-C. the core one trajectory at a time (:func:`nonholonomic.integration.integrate`);
+C. the core one trajectory at a time (:func:`nonholonomic.numerics.integration.integrate`);
 D. scipy ``solve_ivp(DOP853, rtol = atol = 1e-12)`` on a subset, extrapolated per second, with
    scipy's best case for a right-hand side: the same equations on Python floats (~3 µs a call;
    the core's own scipy engine, ``integrate(engine="scipy")`` on the numpy kernels, is ~10× slower).
@@ -55,10 +55,10 @@ from scipy.integrate import solve_ivp  # noqa: E402
 from nonholonomic import get_system  # noqa: E402
 from nonholonomic.analysis.ensemble import CHECK_POINTS  # noqa: E402
 from nonholonomic.evidence.integrals import integral_evidence_batch  # noqa: E402
-from nonholonomic.integration import MACHINE_EPSILON, Trajectory, integrate  # noqa: E402
-from nonholonomic.integration_batch import integrate_batch  # noqa: E402
-from nonholonomic.kernels import parameter_vector  # noqa: E402
-from nonholonomic.taylor import taylor_system  # noqa: E402
+from nonholonomic.numerics.integration import MACHINE_EPSILON, Trajectory, integrate  # noqa: E402
+from nonholonomic.numerics.integration_batch import integrate_batch  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector  # noqa: E402
+from nonholonomic.numerics.taylor import taylor_system  # noqa: E402
 
 INERTIA = np.array([2.0, 3.0, 4.5])
 D = 0.7

@@ -32,7 +32,7 @@ from playwright.sync_api import sync_playwright  # noqa: E402
 
 from nonholonomic.analysis.chaos_map.grid import Grid, complete  # noqa: E402
 from nonholonomic.analysis.poincare import section  # noqa: E402
-from nonholonomic.kernels import parameter_vector  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector  # noqa: E402
 from nonholonomic.systems import get_system  # noqa: E402
 from tests.support import embedded_api  # noqa: E402
 

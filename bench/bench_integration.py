@@ -6,7 +6,7 @@ Run from the repository root::
 
 Compares, in one process,
 
-A. the core, :func:`nonholonomic.integration.integrate` (heyoka Taylor method generated from the
+A. the core, :func:`nonholonomic.numerics.integration.integrate` (heyoka Taylor method generated from the
    symbolic definition, default tolerance = machine epsilon), and
 B. scipy ``solve_ivp(method="DOP853", rtol=atol=1e-12)`` on the independent plain-numpy right-hand
    side :func:`tests.reference.ball_rhs`,
@@ -41,8 +41,8 @@ from scipy.integrate import solve_ivp  # noqa: E402
 from nonholonomic import get_system  # noqa: E402
 from nonholonomic.definition import MechanicalSystem  # noqa: E402
 from nonholonomic.evidence.integrals import integral_evidence  # noqa: E402
-from nonholonomic.integration import MACHINE_EPSILON, Trajectory, integrate  # noqa: E402
-from nonholonomic.kernels import parameter_vector  # noqa: E402
+from nonholonomic.numerics.integration import MACHINE_EPSILON, Trajectory, integrate  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector  # noqa: E402
 from tests.reference import ball_rhs  # noqa: E402
 
 T = TypeVar("T")

@@ -38,9 +38,9 @@ import sympy as sp  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 from bench.bench_integration import ExtendedReference, error_vs  # noqa: E402
-from nonholonomic.integration import integrate  # noqa: E402
-from nonholonomic.kernels import parameter_vector, state_vector  # noqa: E402
 from nonholonomic.lagrangian import derive, parse_system  # noqa: E402
+from nonholonomic.numerics.integration import integrate  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector, state_vector  # noqa: E402
 from nonholonomic.systems import lagrangian  # noqa: E402
 from nonholonomic.systems.lagrangian_classics import CLASSICS  # noqa: E402
 

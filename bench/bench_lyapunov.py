@@ -45,7 +45,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 
 from nonholonomic import get_system  # noqa: E402
 from nonholonomic.analysis.lyapunov import Spectrum, initial_frame, spectrum  # noqa: E402
-from nonholonomic.kernels import parameter_vector  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector  # noqa: E402
 
 INERTIA = np.array([2.0, 3.0, 4.5])
 D = 0.7

@@ -23,8 +23,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from nonholonomic import isomorphisms as iso  # noqa: E402
-from nonholonomic.integration import integrate  # noqa: E402
-from nonholonomic.kernels import parameter_vector  # noqa: E402
+from nonholonomic.numerics.integration import integrate  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector  # noqa: E402
 
 I = np.array([1.0, 2.0, 3.5])
 D = 0.7

@@ -34,8 +34,8 @@ from scipy.optimize import root
 from nonholonomic.analysis.chaos_map.grid import Grid, complete
 from nonholonomic.analysis.periodic_orbit import find_periodic_orbit
 from nonholonomic.analysis.poincare import section
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import parameter_vector
 from nonholonomic.systems import get_system
 
 LEVEL = {"energy": 2.0, "area": 0.0}

@@ -54,7 +54,7 @@ from scipy.integrate import solve_ivp  # noqa: E402
 from nonholonomic import get_system  # noqa: E402
 from nonholonomic.analysis.poincare import Section, section, section_batch  # noqa: E402
 from nonholonomic.definition import MechanicalSystem  # noqa: E402
-from nonholonomic.kernels import parameter_vector  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector  # noqa: E402
 from tests.reference import ball_rhs  # noqa: E402
 
 T = TypeVar("T")

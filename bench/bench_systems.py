@@ -27,8 +27,8 @@ import numpy as np  # noqa: E402
 from bench_integration import ExtendedReference, error_vs, timed  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
-from nonholonomic.integration import MACHINE_EPSILON, integrate  # noqa: E402
-from nonholonomic.kernels import numeric, parameter_vector, state_vector  # noqa: E402
+from nonholonomic.numerics.integration import MACHINE_EPSILON, integrate  # noqa: E402
+from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector  # noqa: E402
 from nonholonomic.systems import SYSTEMS  # noqa: E402
 from schemas.jobs import JobRequest  # noqa: E402
 

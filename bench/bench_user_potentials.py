@@ -38,8 +38,8 @@ import uuid  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from nonholonomic.integration import MACHINE_EPSILON, heyoka_template, integrate  # noqa: E402
-from nonholonomic.kernels import numeric, parameter_vector, state_vector  # noqa: E402
+from nonholonomic.numerics.integration import MACHINE_EPSILON, heyoka_template, integrate  # noqa: E402
+from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector  # noqa: E402
 from nonholonomic.systems import get_system, user_potential  # noqa: E402
 
 A = [0.3, -0.2, 0.5]

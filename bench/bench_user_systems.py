@@ -27,9 +27,9 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from nonholonomic.integration import MACHINE_EPSILON, heyoka_template, integrate  # noqa: E402
-from nonholonomic.kernels import parameter_vector, state_vector  # noqa: E402
-from nonholonomic.local_forms import euler_angles_and_rates, veselova_generalized_chaplygin  # noqa: E402
+from nonholonomic.hamiltonization.local_forms import euler_angles_and_rates, veselova_generalized_chaplygin  # noqa: E402
+from nonholonomic.numerics.integration import MACHINE_EPSILON, heyoka_template, integrate  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector, state_vector  # noqa: E402
 from nonholonomic.systems import (
     ball_on_surface as bs,  # noqa: E402
     generalized_chaplygin as gc,  # noqa: E402

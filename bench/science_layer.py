@@ -38,7 +38,7 @@ from science_geometry import ball_state, jacobi_state  # noqa: E402
 
 from nonholonomic import get_system  # noqa: E402
 from nonholonomic.analysis import indicators  # noqa: E402
-from nonholonomic.kernels import parameter_vector, state_vector  # noqa: E402
+from nonholonomic.numerics.kernels import parameter_vector, state_vector  # noqa: E402
 from nonholonomic.simulation import simulate  # noqa: E402
 
 THETA_STAR = -0.33591693492

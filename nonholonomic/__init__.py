@@ -1,8 +1,8 @@
 """nonholonomic: the science of the service, pure computation.
 
 Borisov & Mamaev, "Hamiltonization of nonholonomic systems". Each system is defined once,
-symbolically (:mod:`nonholonomic.systems`); numeric kernels (:mod:`nonholonomic.kernels`), the
-integrator (:mod:`nonholonomic.integration`) and the evidence (:mod:`nonholonomic.evidence`) are
+symbolically (:mod:`nonholonomic.systems`); numeric kernels (:mod:`nonholonomic.numerics.kernels`), the
+integrator (:mod:`nonholonomic.numerics.integration`) and the evidence (:mod:`nonholonomic.evidence`) are
 derived from that definition. No web, queue or file I/O here.
 
 The package's face is lazy: ``from nonholonomic import simulate`` imports :mod:`nonholonomic.simulation`

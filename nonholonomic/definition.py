@@ -3,7 +3,7 @@
 A system module (e.g. :mod:`nonholonomic.systems.chaplygin_ball`) builds one
 :class:`MechanicalSystem` per potential from sympy expressions. Everything numeric (the heyoka
 integrator, the integrals along a trajectory, the measure checks) is derived from it by
-:mod:`nonholonomic.kernels`; nothing is written twice.
+:mod:`nonholonomic.numerics.kernels`; nothing is written twice.
 """
 
 from __future__ import annotations
@@ -294,7 +294,7 @@ class MechanicalSystem:
     notes: tuple[str, ...] = field(default=())
     hamiltonian_form: Any = field(default=None, compare=False)
     """A Hamiltonian form after a time substitution that comes with the definition (Theorem 1's for a
-    user's generalized Chaplygin system), a :class:`nonholonomic.hamiltonization.HamiltonianForm`."""
+    user's generalized Chaplygin system), a :class:`nonholonomic.hamiltonization.forms.HamiltonianForm`."""
     structure: Any = field(default=None, compare=False)
     """What a structure search found for a user's system (a JSON-able mapping: the measure verdict, the
     integrals in an ansatz, the Hamiltonization), shown with the job's result; None for the paper's kinds."""

@@ -14,7 +14,7 @@ from typing import cast
 import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.kernels import numeric, parameter_vector, state_vector
+from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector
 
 
 @dataclass(frozen=True)

@@ -33,8 +33,8 @@ from nonholonomic.definition import (
 )
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.initial_state import constraint_problems, initial_state_problems, project_initial_state, vector_slice
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import VectorKernel, vectorize
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import VectorKernel, vectorize
 from nonholonomic.refusals import RefusedFields
 
 #: Relative push-forward residual accepted as round-off.
@@ -108,7 +108,7 @@ def _sqrt_diag(entries: Sequence[sp.Expr], power: sp.Rational) -> sp.Matrix:
 def _e3_target(source: MechanicalSystem) -> MechanicalSystem:
     """Veselova's system after the time substitution as a system of its own: e(3), H (2504-11),
     dx/dτ = {H, x}, any of Veselova's potentials (Ũ(Γ) = U(γ(Γ)))."""
-    from nonholonomic.hamiltonization import hamiltonian_form
+    from nonholonomic.hamiltonization.forms import hamiltonian_form
     from nonholonomic.systems import veselova_e3 as ve3
 
     form = hamiltonian_form(source)
@@ -134,7 +134,7 @@ def _e3_target(source: MechanicalSystem) -> MechanicalSystem:
 def veselova_to_e3(potential: str = "zero") -> IsomorphismMap:
     """Eq. (2504-10-2): M = ρ_ω I^(1/2) ω, Γ = ρ_ω⁻¹ I^(−1/2) γ, dτ = dt/(ρ_ω √det I), any potential;
     the inverse ω = (Γ, IΓ)^(1/2) I^(−1/2) M, γ = (Γ, IΓ)^(−1/2) I^(1/2) Γ."""
-    from nonholonomic.hamiltonization import hamiltonian_form
+    from nonholonomic.hamiltonization.forms import hamiltonian_form
     from nonholonomic.systems import get_system
 
     source = get_system("veselova", potential)
@@ -598,7 +598,7 @@ def map_states(m: IsomorphismMap, parameters: dict[str, object], states: Sequenc
         Unknown or missing vectors, or a state off the level set where the map holds (the
         condition, its value and the tolerance are named).
     """
-    from nonholonomic.kernels import parameter_vector, state_vector
+    from nonholonomic.numerics.kernels import parameter_vector, state_vector
 
     p = parameter_vector(m.source, dict(parameters))
     problems: list[tuple[str, str]] = []

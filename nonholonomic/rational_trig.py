@@ -1,6 +1,6 @@
 """Exact decision of identities rational in q, sin qᵢ, cos qᵢ and parameters (the Weierstrass substitution).
 
-Used by Theorem 1 (:mod:`nonholonomic.reducing_multiplier`), the measure check
+Used by Theorem 1 (:mod:`nonholonomic.hamiltonization.reducing_multiplier`), the measure check
 (:mod:`nonholonomic.evidence.measure`) and the paper report: t = tan(q/2), a common denominator, the
 numerator expanded; an expression that is not of that form is undecided (None), never guessed.
 """

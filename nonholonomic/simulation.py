@@ -12,6 +12,7 @@ from nonholonomic.analysis.options import PeriodicOrbitOptions, SectionOptions, 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import IntegralEvidence, integral_evidence
 from nonholonomic.evidence.measure import CheckEvidence, measure_evidence
+from nonholonomic.hamiltonization.structure import bracket_evidence, euler_angle_evidence, structural_checks
 from nonholonomic.initial_state import (
     ProjectionReport,
     initial_state_problems,
@@ -19,10 +20,9 @@ from nonholonomic.initial_state import (
     project_initial_state,
     vector_slice,
 )
-from nonholonomic.integration import ProgressCallback, Trajectory, integrate
 from nonholonomic.isomorphisms import isomorphism_evidence, maps_for
-from nonholonomic.kernels import numeric, parameter_vector, state_vector
-from nonholonomic.structure import bracket_evidence, euler_angle_evidence, structural_checks
+from nonholonomic.numerics.integration import ProgressCallback, Trajectory, integrate
+from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector
 
 if TYPE_CHECKING:
     from nonholonomic.analysis.lyapunov import Spectrum

@@ -29,7 +29,7 @@ from nonholonomic.analysis.chaos_map.indicators import thresholds_for
 from nonholonomic.analysis.ensemble import Member, default_chunk_size, plan
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem, project_initial_state
-from nonholonomic.kernels import parameter_vector, state_vector
+from nonholonomic.numerics.kernels import parameter_vector, state_vector
 from nonholonomic.refusals import RefusedField
 from schemas.analysis import LyapunovRequest, PoincareRequest
 from schemas.jobs import IntegratorOptions, JobStatus, analysis_problems, t_final_within_limit

@@ -15,7 +15,7 @@ from nonholonomic.analysis.chaos_map.grid import Grid, GridError, complete, defa
 from nonholonomic.analysis.periodic_orbit import MAX_PERIOD
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.kernels import parameter_vector
 from schemas.jobs import t_final_within_limit
 from schemas.systems import FiniteFloat, JobSystemSpec
 

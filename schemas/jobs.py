@@ -18,7 +18,7 @@ from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.claims import MAX_CLAIMS, parse_claim
 from nonholonomic.expressions import ExpressionError
 from nonholonomic.initial_state import FieldProblem
-from nonholonomic.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE
+from nonholonomic.numerics.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH
 from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
 from schemas.analysis import LyapunovRequest, PoincareRequest

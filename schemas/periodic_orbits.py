@@ -12,7 +12,7 @@ from nonholonomic.analysis.options import PeriodicOrbitOptions
 from nonholonomic.analysis.periodic_orbit import MAX_PERIOD, PeriodicOrbitError, check_request
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem, vector_slice
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.kernels import parameter_vector
 from schemas.sweeps import sweep_target, swept
 from schemas.systems import FiniteFloat
 

@@ -27,8 +27,8 @@ from nonholonomic.analysis.periodic_orbit import crossing_states
 from nonholonomic.analysis.poincare import section
 from nonholonomic.analysis.sampling import RECIPES, fixable
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import IntegrationError
-from nonholonomic.kernels import numeric, parameter_vector, state_vector
+from nonholonomic.numerics.integration import IntegrationError
+from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector
 from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
 from schemas.explore import ExploreSection
 

@@ -25,7 +25,7 @@ log = logging.getLogger(__name__)
 GRACE_S = 10.0
 
 _CONTEXT = multiprocessing.get_context("forkserver")
-_CONTEXT.set_forkserver_preload(["nonholonomic.reducing_multiplier", "nonholonomic.evidence.brackets",
+_CONTEXT.set_forkserver_preload(["nonholonomic.hamiltonization.reducing_multiplier", "nonholonomic.evidence.brackets",
                                  "service.routes.symbolic", "service.validation", "service.fork_server_warm"])
 
 

@@ -210,7 +210,7 @@ class _Rerun:
 
     def __init__(self, result: Mapping[str, Any], request: Mapping[str, Any], names: Sequence[str]) -> None:
         from nonholonomic.initial_state import vector_slice
-        from nonholonomic.kernels import parameter_vector, state_vector
+        from nonholonomic.numerics.kernels import parameter_vector, state_vector
         from schemas.jobs import JobRequest
 
         job = JobRequest.model_validate(request)
@@ -231,7 +231,7 @@ class _Rerun:
         integration stops (:class:`_Slow`) when it runs past :data:`TIME_BUDGET_S` from ``start``
         (checked between its segments: a short run, under ``FIRST_SEGMENT_STEPS`` steps, is one segment
         and always ends)."""
-        from nonholonomic.integration import integrate
+        from nonholonomic.numerics.integration import integrate
 
         t = self.stored_t
         grid = np.append((t[:-1, None] + np.diff(t)[:, None] * (np.arange(per) / per)).ravel(), t[-1])

@@ -15,7 +15,7 @@ from sqlalchemy.exc import OperationalError
 
 from nonholonomic.analysis.chaos_map import cell_digest, run_cells
 from nonholonomic.analysis.ensemble import digest, run_chunk
-from nonholonomic.integration import IntegrationCancelled
+from nonholonomic.numerics.integration import IntegrationCancelled
 from schemas.chaos_maps import cell_to_json
 from schemas.ensembles import EnsembleRequest
 from schemas.results import member_to_json

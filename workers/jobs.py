@@ -8,7 +8,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from nonholonomic.evidence.claims import claim_evidence
-from nonholonomic.integration import ProgressCallback
+from nonholonomic.numerics.integration import ProgressCallback
 from nonholonomic.simulation import simulate
 from schemas.jobs import JobRequest
 from schemas.report import REPORT_JOB, PaperReportRequest
@@ -42,7 +42,7 @@ def run_job(request: dict[str, Any], progress: ProgressCallback | None = None) -
     ----------
     request : a ``JobRequest`` as JSON, or a ``PaperReportRequest`` (``"job": "paper_report"``).
     progress : ``progress(fraction) -> keep_going``; returning False cancels the job
-        (:class:`nonholonomic.integration.IntegrationCancelled` is raised).
+        (:class:`nonholonomic.numerics.integration.IntegrationCancelled` is raised).
 
     Returns
     -------
@@ -91,7 +91,7 @@ def run_report(request: dict[str, Any], progress: ProgressCallback | None = None
     from datetime import UTC, datetime
 
     from nonholonomic import memo
-    from nonholonomic.integration import IntegrationCancelled
+    from nonholonomic.numerics.integration import IntegrationCancelled
     from nonholonomic.report import paper_report
     from workers.disk_memo import install_from_settings, response_fingerprint, versions
 
@@ -152,8 +152,8 @@ def warm_up(state: WarmUp | None = None) -> WarmUp:
     disk = install_from_settings()
     state.cache = str(disk.directory) if disk is not None else "off"
     from nonholonomic.evidence.measure import start_divergence_proof
-    from nonholonomic.integration import MACHINE_EPSILON, heyoka_template
-    from nonholonomic.kernels import numeric
+    from nonholonomic.numerics.integration import MACHINE_EPSILON, heyoka_template
+    from nonholonomic.numerics.kernels import numeric
     from nonholonomic.systems import SUPPORTED_POTENTIALS, SURFACE_KINDS, get_system
 
     # a user's surface is compiled with its first job: the example's would be wasted

@@ -10,7 +10,7 @@ from celery import Task, states
 from celery.exceptions import Ignore, SoftTimeLimitExceeded, TimeLimitExceeded
 from sqlalchemy.exc import OperationalError
 
-from nonholonomic.integration import IntegrationCancelled
+from nonholonomic.numerics.integration import IntegrationCancelled
 from schemas.settings import get_settings
 from workers.broker_messages import request_from_args
 from workers.celery_app import app

@@ -17,12 +17,12 @@ from typing import Any
 import heyoka as hy
 import numpy as np
 
-from nonholonomic import integration_batch
 from nonholonomic.analysis.options import SectionOptions, SpectrumOptions
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import integral_evidence_batch
 from nonholonomic.initial_state import parameter_warnings
-from nonholonomic.integration import ProgressCallback
+from nonholonomic.numerics import integration_batch
+from nonholonomic.numerics.integration import ProgressCallback
 from nonholonomic.simulation import SimulationResult, evidence, phase
 
 #: Seconds of work one chunk aims at (the default ``chunk_size``).
@@ -90,7 +90,7 @@ def default_chunk_size(system: MechanicalSystem, t_final: float, *, poincare: Se
                        lyapunov: SpectrumOptions | None = None, lanes: int | None = None,
                        indicators: bool = False) -> int:
     """Members per chunk for about :data:`CHUNK_SECONDS` of work, a multiple of ``lanes`` (by default
-    heyoka's SIMD batch size, the lanes :func:`~nonholonomic.integration_batch.integrate_batch` fills)."""
+    heyoka's SIMD batch size, the lanes :func:`~nonholonomic.numerics.integration_batch.integrate_batch` fills)."""
     lanes = lanes or hy.recommended_simd_size()
     per_unit_time = SECONDS_PER_UNIT_TIME * (1 + SECTION_FACTOR * (poincare is not None))
     if lyapunov is not None:  # the orbit with its whole tangent matrix, a QR every interval
@@ -132,7 +132,7 @@ def run_chunk(system: MechanicalSystem, members: Sequence[Member], t_final: floa
     parameter_groups : the named parameter groups (for the warnings of unrealizable moments); members
         of a sweep differ in one of them, so the warnings are computed from each member's own vector.
     progress : ``progress(fraction) -> keep_going`` over the whole chunk; False cancels
-        (:class:`~nonholonomic.integration.IntegrationCancelled` is raised).
+        (:class:`~nonholonomic.numerics.integration.IntegrationCancelled` is raised).
     """
     if not members:
         return []

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, NotRequired, TypedDict
 import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import IntegrationError, ProgressCallback
+from nonholonomic.numerics.integration import IntegrationError, ProgressCallback
 
 if TYPE_CHECKING:
     from nonholonomic.analysis.lyapunov import Spectrum
@@ -119,7 +119,7 @@ class PeriodicOrbitOptions:
         (None without one, or when the orbit was not closed: there is nothing to continue)."""
         from nonholonomic.analysis.periodic_orbit import find_periodic_orbit
         from nonholonomic.analysis.periodic_orbit.continuation import continue_orbit
-        from nonholonomic.integration import MACHINE_EPSILON
+        from nonholonomic.numerics.integration import MACHINE_EPSILON
 
         share = 1.0 / (1 + bool(self.sweep_values))
         first = None if progress is None else (lambda f: progress(share * f))

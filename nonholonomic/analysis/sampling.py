@@ -57,7 +57,7 @@ import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import vector_slice
-from nonholonomic.kernels import numeric
+from nonholonomic.numerics.kernels import numeric
 from nonholonomic.refusals import RefusedField
 
 #: Candidates drawn per batch (fixed: the random stream and hence the samples do not depend on count).
@@ -459,7 +459,7 @@ def on_level(system: MechanicalSystem, parameters: np.ndarray, level: Mapping[st
     ----------
     system : the system (kind and potential).
     parameters : the parameter vector, in the order of ``system.parameter_symbols``
-        (:func:`nonholonomic.kernels.parameter_vector`).
+        (:func:`nonholonomic.numerics.kernels.parameter_vector`).
     level : integral name → value, names from :func:`fixable` (the energy is required), e.g.
         ``{"energy": 1.0, "area": 0.3}`` for Chaplygin's ball (eq. 2604-2) or
         ``{"energy": 1.0, "K": 0.5}`` for the nonholonomic Jacobi problem (eqs. 2804-2, 2804-4).

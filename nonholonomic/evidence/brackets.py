@@ -1,8 +1,8 @@
 """Machine-checked Poisson structures: antisymmetry, the Jacobi identity, Casimirs and the rank.
 
-A structure is its Poisson matrix ``P_ij = {x_i, x_j}`` (:class:`nonholonomic.brackets.PoissonStructure`).
-For a skew matrix the Jacobi identity ``{x_i, {x_j, x_k}} + cycl. = 0`` is the vanishing of the
-Jacobiator
+A structure is its Poisson matrix ``P_ij = {x_i, x_j}``
+(:class:`nonholonomic.hamiltonization.poisson.PoissonStructure`). For a skew matrix the Jacobi identity
+``{x_i, {x_j, x_k}} + cycl. = 0`` is the vanishing of the Jacobiator
 
     J_ijk = Σ_l (P_il ∂_l P_jk + P_jl ∂_l P_ki + P_kl ∂_l P_ij),        i < j < k,
 
@@ -19,7 +19,7 @@ more than ``max_proof_ops`` sympy operations (:mod:`nonholonomic.work_limits`) i
 says so: the same verdict and words on every machine, whatever its load.
 
 Pointwise checks evaluate the individual terms (exact symbolic derivatives, compiled with
-:func:`nonholonomic.kernels.vectorize` over ``variables + parameters``) and report
+:func:`nonholonomic.numerics.kernels.vectorize` over ``variables + parameters``) and report
 ``|Σ terms| / Σ |terms|``, the residual relative to the size of what cancels, maximised over points.
 
 Checked in tests/unit/test_brackets.py: eq. (2604-6) as printed satisfies Jacobi for symbolic I, D
@@ -41,9 +41,9 @@ import sympy as sp
 from sympy.core.function import AppliedUndef
 
 from nonholonomic import bounded, work_limits
-from nonholonomic.brackets import PoissonStructure
 from nonholonomic.evidence.measure import CheckEvidence
-from nonholonomic.kernels import vectorize
+from nonholonomic.hamiltonization.poisson import PoissonStructure
+from nonholonomic.numerics.kernels import vectorize
 from nonholonomic.work_limits import MAX_PROOF_OPS, WorkLimits, operations, over
 
 #: Pointwise relative residual accepted as round-off.

@@ -20,8 +20,8 @@ from nonholonomic import bounded, work_limits
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import integral_tolerance
 from nonholonomic.expressions import _name_problem, parse_expression
-from nonholonomic.integration import Trajectory
-from nonholonomic.kernels import vectorize
+from nonholonomic.numerics.integration import Trajectory
+from nonholonomic.numerics.kernels import vectorize
 from nonholonomic.work_limits import WorkLimits, operations, over
 
 #: Largest numerator (terms) handed to ``sympy.simplify`` (functions of the state, e.g. trigonometric).

@@ -11,9 +11,9 @@ import heyoka as hy
 import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import Trajectory
-from nonholonomic.kernels import numeric, parameter_vector
-from nonholonomic.taylor import TaylorSystem, taylor_system
+from nonholonomic.numerics.integration import Trajectory
+from nonholonomic.numerics.kernels import numeric, parameter_vector
+from nonholonomic.numerics.taylor import TaylorSystem, taylor_system
 
 #: The verdict's tolerance on the relative drift never goes below this.
 INTEGRAL_TOLERANCE_FLOOR = 1e-10
@@ -183,7 +183,7 @@ def _group(system: MechanicalSystem, cf: hy.cfunc, buffers: _Buffers, runtime: n
 @lru_cache(maxsize=64)
 def compiled_integrals(system: MechanicalSystem) -> tuple[hy.cfunc, TaylorSystem]:
     """A heyoka compiled function of the state: ``[integral_1, ..., integral_k, scale_1, ..., scale_k]``,
-    with :func:`~nonholonomic.taylor.taylor_system`'s runtime parameters (once per system and process)."""
+    with :func:`~nonholonomic.numerics.taylor.taylor_system`'s runtime parameters (once per system and process)."""
     ts = taylor_system(system)
     exprs = [c.expression for c in system.integrals] + [c.scale for c in system.integrals]
     return hy.cfunc(ts.expressions(exprs), list(ts.variables[: ts.n_state])), ts
@@ -201,7 +201,7 @@ def integral_series(system: MechanicalSystem, parameters: dict[str, object],
     ----------
     system : the symbolic definition.
     parameters : named parameter groups as a request gives them (``{"inertia": [..], "D": .., "a": [..]}``;
-        flattened by :func:`~nonholonomic.kernels.parameter_vector`).
+        flattened by :func:`~nonholonomic.numerics.kernels.parameter_vector`).
     states : shape ``(n, system.dimension)``: one phase point per row, columns in the order of
         ``system.state_symbols``.
 

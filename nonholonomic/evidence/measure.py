@@ -20,7 +20,7 @@ import sympy as sp
 
 from nonholonomic import bounded, work_limits
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.kernels import numeric
+from nonholonomic.numerics.kernels import numeric
 from nonholonomic.work_limits import WorkLimits, operations, over
 
 #: Pointwise relative residual accepted as round-off.

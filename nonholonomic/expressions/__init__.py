@@ -2,7 +2,7 @@
 
 Users send mechanical data as text, e.g. the Lagrangian of a body in Euler angles
 ``"1/2*(I1*thetadot**2 + sin(theta)**2*phidot**2)"`` or an entry ``"x*y - z"`` of a Poisson matrix
-``P_ij = {x_i, x_j}`` (the form of eqs. (2604-6) and (2704-9); see :mod:`nonholonomic.brackets`). This
+``P_ij = {x_i, x_j}`` (the form of eqs. (2604-6) and (2704-9); see :mod:`nonholonomic.hamiltonization.poisson`). This
 module turns such text into sympy objects without ``eval``, ``exec``, ``sympify`` or ``parse_expr``:
 the text is parsed by Python's own parser (``ast.parse(text, mode="eval")``, which builds a tree and
 runs nothing), the tree is checked against a whitelist, and the sympy expression is built node by node

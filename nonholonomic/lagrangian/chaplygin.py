@@ -23,7 +23,7 @@ b coming from terms of L linear in the velocities; U = −L*|_{q̇=0}.
 
 Measures: Theorem 1's ρ(q) dP dq (P = ∂L*/∂q̇) is ρ det G* dq dq̇ (G* = ∂²L*/∂q̇²). Since nothing
 depends on s and ∂ṡ/∂s = 0, a density of q alone for the reduced flow is one for the flow in
-(q, s, q̇) too: the density ρ(q, s) dq ds du of :func:`nonholonomic.lagrangian.measure.measure_verdict`
+(q, s, q̇) too: the density ρ(q, s) dq ds du of :func:`nonholonomic.lagrangian.measure_search.measure_verdict`
 (with u = q̇, the shape velocities) is N det G* up to a constant factor.
 """
 
@@ -151,7 +151,7 @@ def _try(data: LagrangianData, cyclic: tuple[int, ...], points: list[dict[sp.Sym
     kinetic = sp.expand(L_star + U)
     used = set().union(*(e.free_symbols for e in (kinetic, U, a1, a2, b)))
     kept = [(p, val) for p, val in zip(data.parameters, data.values) if p in used]
-    texts = (("lagrangian", sp.sstr(kinetic)), ("a1", sp.sstr(a1)), ("a2", sp.sstr(a2)), ("b", sp.sstr(b)),
+    texts = (("L", sp.sstr(kinetic)), ("a1", sp.sstr(a1)), ("a2", sp.sstr(a2)), ("b", sp.sstr(b)),
              ("potential", sp.sstr(U)))
     chaplygin = ChaplyginData(q=(q1, q2), v=u, L=kinetic, U=U, a1=a1, a2=a2, b=b,
                               parameters=tuple(p for p, _ in kept), texts=texts)
@@ -163,7 +163,7 @@ def chaplygin_reduction(data: LagrangianData, at_values: bool = False) -> Chaply
     """Whether ``data`` is a Chaplygin system with a 2-dimensional shape space, and its reduced form (2704-7).
 
     Every choice of k = n − 2 coordinates as the cyclic ones s is tried, the last coordinates first (the
-    first ones stay shape coordinates, as in :mod:`nonholonomic.lagrangian.measure`): the constraints must
+    first ones stay shape coordinates, as in :mod:`nonholonomic.lagrangian.measure_search`): the constraints must
     solve for ṡ (regular minor at every sample point), and L and the solved coefficients β must not depend
     on s. The first choice that works is returned.
 

@@ -10,13 +10,18 @@ from functools import lru_cache
 import numpy as np
 import sympy as sp
 
-from nonholonomic import isomorphisms as iso, local_forms as lf
-from nonholonomic.brackets import chaplygin_ball_bracket, generalized_chaplygin_bracket
+from nonholonomic import isomorphisms as iso
 from nonholonomic.definition import dot
 from nonholonomic.evidence.brackets import casimir_checks, jacobi_symbolic
 from nonholonomic.evidence.measure import measure_evidence
-from nonholonomic.hamiltonization import flow_residual, hamiltonian_form, symbolic_flow_identity
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.hamiltonization import local_forms as lf
+from nonholonomic.hamiltonization.forms import (
+    flow_residual,
+    hamiltonian_form,
+    symbolic_flow_identity,
+)
+from nonholonomic.hamiltonization.poisson import chaplygin_ball_bracket, generalized_chaplygin_bracket
+from nonholonomic.numerics.kernels import parameter_vector
 from nonholonomic.report.common import (
     GAMMA0,
     INERTIA,
@@ -48,7 +53,7 @@ def theorem_1() -> Row:
                   "time-substituted system is Hamiltonian with the bracket (2704-9)", "Theorem 1, 2704-8, 2704-9",
                   printed="S_bar = B(q)", corrected="S_bar = N(q) B(q); the flow is dx/dtau = {x, H_bar}",
                   errata="ERRATA 6, 14")
-    from nonholonomic.theorem_1 import prove_theorem_1
+    from nonholonomic.hamiltonization.theorem_1 import prove_theorem_1
 
     right, printed = prove_theorem_1("N*B"), prove_theorem_1("B")
     return Row(claim, [proof(*right)], printed_check=proof(*printed))
@@ -66,8 +71,8 @@ def bracket_2704_9() -> Row:
 @lru_cache(maxsize=1)
 def _ball_theorem_1():
     from nonholonomic.expressions import declare_symbols, parse_expression
-    from nonholonomic.local_forms import BALL_MONOPOLE_CHART
-    from nonholonomic.reducing_multiplier import hamiltonize
+    from nonholonomic.hamiltonization.local_forms import BALL_MONOPOLE_CHART
+    from nonholonomic.hamiltonization.reducing_multiplier import hamiltonize
 
     spec = lf.chaplygin_ball_generalized_chaplygin()
     names = ["theta", "phi", "thetadot", "phidot", "I1", "I2", "I3", "D", "c", "N"]
@@ -105,7 +110,7 @@ def ball_multiplier() -> Row:
 def monopole() -> Row:
     claim = Claim(GENERAL, "For the ball with c != 0 the gyroscopic 2-form S_bar dq1^dq2 is not "
                   "exact on the sphere (a monopole); for c = 0 it is", "text after 2704-9")
-    from nonholonomic.monopole import monopole_charge
+    from nonholonomic.hamiltonization.monopole import monopole_charge
 
     result, sym, values = _ball_theorem_1()
     if result.monopole is None or result.S_bar is None:

@@ -12,8 +12,8 @@ import sympy as sp
 
 from nonholonomic import bounded, isomorphisms as iso
 from nonholonomic.evidence.measure import CheckEvidence
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import parameter_vector
 from nonholonomic.report.verdict import Check
 from nonholonomic.simulation import SimulationResult, simulate
 from nonholonomic.systems import SYSTEMS, get_system

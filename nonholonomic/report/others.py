@@ -12,8 +12,8 @@ import sympy as sp
 from nonholonomic.definition import FirstIntegral, dot
 from nonholonomic.evidence.integrals import integral_evidence
 from nonholonomic.evidence.measure import measure_evidence, symbolic_divergence_vanishes
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import parameter_vector, state_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import parameter_vector, state_vector
 from nonholonomic.report.common import (
     INERTIA,
     D,

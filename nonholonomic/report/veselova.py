@@ -9,12 +9,17 @@ from collections.abc import Sequence
 import numpy as np
 import sympy as sp
 
-from nonholonomic import isomorphisms as iso, local_forms as lf
+from nonholonomic import isomorphisms as iso
 from nonholonomic.definition import dot
 from nonholonomic.evidence.measure import measure_evidence
-from nonholonomic.hamiltonization import flow_residual, hamiltonian_form, symbolic_flow_identity
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import parameter_vector, vectorize
+from nonholonomic.hamiltonization import local_forms as lf
+from nonholonomic.hamiltonization.forms import (
+    flow_residual,
+    hamiltonian_form,
+    symbolic_flow_identity,
+)
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import parameter_vector, vectorize
 from nonholonomic.report.common import (
     GAMMA0,
     INERTIA,

@@ -10,7 +10,7 @@ with L(q, q̇) quadratic in the velocities (Theorem 1), here L − U for a poten
     G q̈ = (q̇₂ S, −q̇₁ S) + ∂L/∂q − (∂²L/∂q̇∂q) q̇,   G = ∂²L/∂q̇∂q̇,
 
 the state being (q, q̇). The energy E = (q̇, ∂L/∂q̇) − L is an integral (S does no work:
-q̇₁ q̇₂ S − q̇₂ q̇₁ S = 0). Theorem 1 (:func:`nonholonomic.reducing_multiplier.hamiltonize`) decides
+q̇₁ q̇₂ S − q̇₂ q̇₁ S = 0). Theorem 1 (:func:`nonholonomic.hamiltonization.reducing_multiplier.hamiltonize`) decides
 whether an invariant measure ρ(q) dP₁dP₂dq₁dq₂ exists (P = ∂L/∂q̇) and finds ρ; then
 
 * the measure in the state (q, q̇) is ρ(q) det G(q) dq dq̇ (dP = det G dq̇ at fixed q), checked like
@@ -18,7 +18,7 @@ whether an invariant measure ρ(q) dP₁dP₂dq₁dq₂ exists (P = ∂L/∂q̇)
 * N = ρ is the reducing multiplier, dτ = N dt (eq. 2704-8), integrated beside t;
 * in p = N ∂L/∂q̇ the τ-flow is Hamiltonian with H̄(q, p) = E and the bracket (2704-9)
   {q_i, p_j} = δ_ij, {p₁, p₂} = S̄ = N B (ERRATA 6, 14) in Theorem 1's convention dx/dτ = {x, H̄};
-  :mod:`nonholonomic.brackets` uses dx/dτ = {H, x}, so the form here carries the same matrix with
+  :mod:`nonholonomic.hamiltonization.poisson` uses dx/dτ = {H, x}, so the form here carries the same matrix with
   the opposite sign. The flow = Hamiltonian field, the Jacobi identity and H̄ = E are checked along
   the trajectory (the ``bracket`` check).
 
@@ -56,7 +56,7 @@ EXPRESSION_FIELDS = ("L", "a1", "a2", "b", "potential")
 
 
 def _example() -> dict[str, Any]:
-    from nonholonomic.local_forms import veselova_generalized_chaplygin
+    from nonholonomic.hamiltonization.local_forms import veselova_generalized_chaplygin
 
     veselova = veselova_generalized_chaplygin()
     return {"kind": KIND, "coordinates": veselova["coordinates"].split(","),
@@ -212,9 +212,9 @@ def energy(data: ChaplyginData) -> sp.Expr:
 
 def theorem_1(data: ChaplyginData) -> tuple[Any, str]:
     """Theorem 1 for the data: (the Hamiltonian form or None, why not)."""
-    from nonholonomic.brackets import PoissonStructure
-    from nonholonomic.hamiltonization import HamiltonianForm
-    from nonholonomic.reducing_multiplier import hamiltonize
+    from nonholonomic.hamiltonization.forms import HamiltonianForm
+    from nonholonomic.hamiltonization.poisson import PoissonStructure
+    from nonholonomic.hamiltonization.reducing_multiplier import hamiltonize
 
     result = hamiltonize(data.L, data.q, data.v, data.a1, data.a2, data.b, potential=data.U)
     N = result.reducing_multiplier

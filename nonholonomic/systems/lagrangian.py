@@ -11,17 +11,17 @@ the state being (q, q̇) (vectors ``q`` and ``q_dot``, n components each, n ≤ 
 * the energy E = (q̇, ∂L/∂q̇) − L (the constraint forces do no work: q̇ᵀAᵀλ = 0);
 * every constraint fᵢ = Σⱼ Aᵢⱼ(q) q̇ⱼ, which stays 0 (the derived field keeps A q̇ constant);
 * an invariant measure only when the search on the constraint manifold finds and proves one
-  (:func:`nonholonomic.lagrangian.measure.measure_verdict`, with ``reduce``): ρ(q) dq du there, u the
+  (:func:`nonholonomic.lagrangian.measure_search.measure_verdict`, with ``reduce``): ρ(q) dq du there, u the
   independent velocities. In the state (q, q̇) this is the density ρ(q) |det A_D(q)| (A_D the columns of
   A of the dependent velocities: (u, A q̇) are coordinates of q̇ with Jacobian det A_D), and div(ρ |det A_D| f)
   vanishes on the manifold, where the motion is (proven with the dependent velocities substituted,
   :attr:`InvariantMeasure.on_manifold`). A verdict ``none`` (an obstruction proven) or ``undecided`` claims
   nothing and says which in the ``measure`` check;
 * with ``reduce``, the integrals linear and quadratic in the velocities that the ansatz search proves
-  (:func:`nonholonomic.lagrangian.integrals.integral_search`), each checked along the trajectory too;
+  (:func:`nonholonomic.lagrangian.integral_search.integral_search`), each checked along the trajectory too;
 * with ``reduce``, when the system is a Chaplygin system with two shape coordinates: Theorem 1's time
   dτ = N dt (integrated beside t) and Hamiltonian form, checked by the ``bracket`` check
-  (:mod:`nonholonomic.lagrangian.hamiltonization`).
+  (:mod:`nonholonomic.lagrangian.hamiltonization_search`).
 
 An initial q̇ off a constraint is refused (tolerance :data:`CONSTRAINT_TOLERANCE` relative to the
 constraint's terms) or, on request, projected onto the constraints: orthogonally (Euclidean) onto the
@@ -52,9 +52,9 @@ from nonholonomic.definition import (
 from nonholonomic.lagrangian import DataError, LagrangianData, derive
 from nonholonomic.lagrangian.checks import number, sample_points
 from nonholonomic.lagrangian.equations import energy_of, plain_field
-from nonholonomic.lagrangian.hamiltonization import hamiltonization
-from nonholonomic.lagrangian.integrals import integral_search
-from nonholonomic.lagrangian.measure import measure_verdict
+from nonholonomic.lagrangian.hamiltonization_search import hamiltonization
+from nonholonomic.lagrangian.integral_search import integral_search
+from nonholonomic.lagrangian.measure_search import measure_verdict
 from nonholonomic.lagrangian.parse import KIND, MAX_COORDINATES
 from nonholonomic.memo import remembered
 

@@ -21,7 +21,6 @@ from functools import lru_cache
 
 import sympy as sp
 
-from nonholonomic.brackets import e3
 from nonholonomic.definition import (
     FirstIntegral,
     InvariantMeasure,
@@ -32,6 +31,7 @@ from nonholonomic.definition import (
     StateVector,
     dot,
 )
+from nonholonomic.hamiltonization.poisson import e3
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, catalog_of, resolve
 from nonholonomic.systems.clebsch import I1, I2, I3, INERTIA, inertia

@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
-from nonholonomic.integration import IntegrationCancelled
+from nonholonomic.numerics.integration import IntegrationCancelled
 from schemas.settings import Settings
 from service.backends.base import JobRecord, QueueFull, decode_cursor, encode_cursor
 from service.backends.job_threads import JobThreads

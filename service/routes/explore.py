@@ -15,7 +15,7 @@ from fastapi.responses import HTMLResponse, JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from nonholonomic.analysis.periodic_orbit import PeriodicOrbitError, find_periodic_orbit
-from nonholonomic.integration import IntegrationError
+from nonholonomic.numerics.integration import IntegrationError
 from schemas.explore import (
     ExplorationAccepted,
     ExplorationView,

@@ -223,7 +223,7 @@ async def verify_bracket(request: BracketVerifyRequest, http: Request, response:
 
 def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
     """Theorem 1 for a user's system, as JSON (runs in the child)."""
-    from nonholonomic.reducing_multiplier import hamiltonize as reduce
+    from nonholonomic.hamiltonization.reducing_multiplier import hamiltonize as reduce
 
     request = HamiltonizeRequest.model_validate(payload)
     names = request.coordinates + request.velocities + list(request.parameters) + request.symbols
@@ -297,7 +297,7 @@ def _free_names(*texts: str) -> list[str]:
             response_model=HamiltonizeExamples, response_model_exclude_unset=True,
             summary="Worked examples: Veselova and Chaplygin's ball in Euler angles")
 def hamiltonize_examples() -> dict[str, Any]:
-    from nonholonomic.local_forms import (
+    from nonholonomic.hamiltonization.local_forms import (
         BALL_MONOPOLE_CHART,
         chaplygin_ball_generalized_chaplygin,
         veselova_generalized_chaplygin,

@@ -118,7 +118,7 @@ def test_sweep_members_equal_single_jobs(client):
 def test_a_member_that_blows_up_fails_alone(client, monkeypatch):
     """A member whose integration fails (heyoka's non-finite state; admissible inputs no longer
     overflow, so the failure is injected into the second lane) fails alone."""
-    from nonholonomic import integration, integration_batch
+    from nonholonomic.numerics import integration, integration_batch
 
     huge = {"members": {"initial_states": [STATE, {"M": [1e200, 1e200, 0.0], "gamma": [0.0, 0.6, 0.8]}]},
             "system": dict(BALL), "t_final": 10.0}

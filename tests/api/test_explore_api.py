@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from nonholonomic.analysis.poincare import section
-from nonholonomic.kernels import parameter_vector, state_vector
+from nonholonomic.numerics.kernels import parameter_vector, state_vector
 from nonholonomic.systems import get_system
 from service.security import EXPLORE_POLICY
 

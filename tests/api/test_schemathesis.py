@@ -33,7 +33,7 @@ from schemathesis.specs.openapi.checks import (
     status_code_conformance,
 )
 
-from nonholonomic.integration import IntegrationCancelled
+from nonholonomic.numerics.integration import IntegrationCancelled
 from schemas.settings import Settings, get_settings
 from service.backends import embedded
 from service.main import create_app

@@ -66,7 +66,8 @@ def test_http_reference_lists_the_routes_from_the_openapi_document(site: Path) -
 
 def test_python_reference_documents_the_front_doors(site: Path) -> None:
     core = (site / "reference/python/index.html").read_text(encoding="utf-8")
-    for anchor in ("nonholonomic.simulate", "nonholonomic.get_system", "nonholonomic.reducing_multiplier.hamiltonize"):
+    for anchor in ("nonholonomic.simulate", "nonholonomic.get_system",
+                   "nonholonomic.hamiltonization.reducing_multiplier.hamiltonize"):
         assert f'id="{anchor}"' in core, anchor
     client = (site / "reference/client/index.html").read_text(encoding="utf-8")
     assert 'id="nonholonomic_client.api.Client.submit"' in client

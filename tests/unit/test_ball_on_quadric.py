@@ -15,8 +15,8 @@ from nonholonomic import simulate
 from nonholonomic.definition import FirstIntegral, InvariantMeasure, vector_symbols
 from nonholonomic.evidence.integrals import integral_evidence
 from nonholonomic.evidence.measure import pointwise_divergence_residual, symbolic_divergence_vanishes
-from nonholonomic.integration import MACHINE_EPSILON, integrate
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.integration import MACHINE_EPSILON, integrate
+from nonholonomic.numerics.kernels import parameter_vector
 from nonholonomic.systems import ball_on_quadric as bq
 
 # A solid ball (D0 = 2/5 m R²) on a triaxial ellipsoid and on a rotated one (eigenvalues ≈ 0.7, 1.5, 2.3).

@@ -15,8 +15,8 @@ from nonholonomic.definition import InvariantMeasure
 from nonholonomic.evidence.measure import pointwise_divergence_residual, symbolic_divergence_vanishes
 from nonholonomic.expressions import ExpressionError
 from nonholonomic.initial_state import initial_state_problems, project_initial_state
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import numeric, parameter_vector, state_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector
 from nonholonomic.systems import ball_on_quadric as bq, ball_on_surface as bs, get_system
 
 D0, M, R = 0.036, 1.0, 0.3

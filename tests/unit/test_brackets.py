@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from nonholonomic.brackets import PoissonStructure, chaplygin_ball_bracket, e3, generalized_chaplygin_bracket
 from nonholonomic.evidence.brackets import (
     casimir_checks,
     casimir_pointwise,
@@ -19,6 +18,12 @@ from nonholonomic.evidence.brackets import (
     rank_at,
     structure_evidence,
     verify_user_bracket,
+)
+from nonholonomic.hamiltonization.poisson import (
+    PoissonStructure,
+    chaplygin_ball_bracket,
+    e3,
+    generalized_chaplygin_bracket,
 )
 from nonholonomic.systems import chaplygin_ball as ball
 

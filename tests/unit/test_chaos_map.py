@@ -22,7 +22,7 @@ from nonholonomic.analysis.chaos_map import (
 )
 from nonholonomic.analysis.chaos_map.grid import Grid, GridError, complete, default_ranges, plan
 from nonholonomic.analysis.ensemble import Member
-from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.numerics.kernels import numeric, parameter_vector
 from nonholonomic.systems import get_system
 from tests.unit.test_sampling import assert_on_level
 
@@ -136,7 +136,7 @@ def test_in_the_linear_field_megno_grows_like_half_the_exponent_times_t_and_matc
     assert np.all((ratio > 0.5) & (ratio < 1.5)), ratio
     n = system.dimension
     w0 = initial_frame(n)[:, 0]
-    from nonholonomic.taylor import taylor_system
+    from nonholonomic.numerics.taylor import taylor_system
 
     for k in list(chaotic[:3]) + list(np.flatnonzero(megno < 2.5)[:2]):
         ta = variational_template(system, indicators.MACHINE_EPSILON)
@@ -158,7 +158,7 @@ def test_megno_is_the_mean_of_y_computed_from_the_logarithm_of_the_growth():
     x0 = X[len(X) // 2]
     T = 60.0
     eqs = list(indicators.indicator_equations(system))
-    from nonholonomic.taylor import taylor_system
+    from nonholonomic.numerics.taylor import taylor_system
 
     ts = taylor_system(system)
     n = system.dimension

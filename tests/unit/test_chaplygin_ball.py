@@ -12,8 +12,8 @@ from nonholonomic import get_system, simulate
 from nonholonomic.definition import InvariantMeasure
 from nonholonomic.evidence.integrals import integral_evidence
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
-from nonholonomic.integration import MACHINE_EPSILON, StepRecorder, integrate
-from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.numerics.integration import MACHINE_EPSILON, StepRecorder, integrate
+from nonholonomic.numerics.kernels import numeric, parameter_vector
 from nonholonomic.systems import chaplygin_ball as ball
 from tests.reference import ball_reference
 

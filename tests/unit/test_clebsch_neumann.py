@@ -16,8 +16,8 @@ from nonholonomic.definition import InvariantMeasure, dot
 from nonholonomic.evidence.integrals import integral_evidence
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
 from nonholonomic.initial_state import initial_state_problems
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import parameter_vector
 from nonholonomic.systems import clebsch as cl, neumann as nm
 
 s, L, I, I_inv, det_I = cl.s, cl.L, cl.inertia, cl.inertia_inv, cl.det_inertia

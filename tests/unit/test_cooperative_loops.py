@@ -13,7 +13,7 @@ import pytest
 from nonholonomic.analysis import lyapunov
 from nonholonomic.analysis.lyapunov import spectrum
 from nonholonomic.analysis.poincare import section, section_batch
-from nonholonomic.integration import IntegrationCancelled, IntegrationError
+from nonholonomic.numerics.integration import IntegrationCancelled, IntegrationError
 from nonholonomic.systems import get_system
 
 BALL = get_system("chaplygin_ball", "zero")

@@ -9,12 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nonholonomic import get_system, integration
+from nonholonomic import get_system
 from nonholonomic.analysis.ensemble import CHECK_POINTS, Member, run_chunk
 from nonholonomic.evidence.integrals import integral_evidence_batch
-from nonholonomic.integration import IntegrationError, Trajectory, integrate
-from nonholonomic.integration_batch import integrate_batch
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics import integration
+from nonholonomic.numerics.integration import IntegrationError, Trajectory, integrate
+from nonholonomic.numerics.integration_batch import integrate_batch
+from nonholonomic.numerics.kernels import parameter_vector
 
 BALL = get_system("chaplygin_ball", "zero")
 P_BALL = parameter_vector(BALL, {"inertia": [2.0, 3.0, 4.5], "D": 0.7})

@@ -13,7 +13,6 @@ import sympy as sp
 from hypothesis import HealthCheck, assume, given, settings, strategies as st
 
 from nonholonomic import expressions as ex
-from nonholonomic.brackets import chaplygin_ball_bracket, e3
 from nonholonomic.expressions import (
     ALLOWED_FUNCTIONS,
     ExpressionError,
@@ -21,6 +20,7 @@ from nonholonomic.expressions import (
     parse_expression,
     parse_matrix,
 )
+from nonholonomic.hamiltonization.poisson import chaplygin_ball_bracket, e3
 from tests.support import hang_guard
 
 NAMES = ["I1", "I2", "I3", "theta", "phi", "thetadot", "phidot", "x", "y", "z", "e", "E1", "E2"]

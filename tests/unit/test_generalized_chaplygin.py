@@ -15,7 +15,7 @@ from pydantic import ValidationError
 from nonholonomic import simulate
 from nonholonomic.definition import InvariantMeasure
 from nonholonomic.evidence.measure import pointwise_divergence_residual
-from nonholonomic.local_forms import (
+from nonholonomic.hamiltonization.local_forms import (
     chaplygin_ball_generalized_chaplygin,
     euler_angles_and_rates,
     veselova_generalized_chaplygin,

@@ -1,5 +1,5 @@
-"""The generated heyoka right-hand sides (nonholonomic.taylor) and the integration paths built on
-them (nonholonomic.integration): same equations as the sympy definitions, fewer operations, step
+"""The generated heyoka right-hand sides (nonholonomic.numerics.taylor) and the integration paths built on
+them (nonholonomic.numerics.integration): same equations as the sympy definitions, fewer operations, step
 states without a Python call per step on long runs, batch mode member by member like integrate()."""
 
 from __future__ import annotations
@@ -9,19 +9,20 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from nonholonomic import get_system, integration as integ
+from nonholonomic import get_system
 from nonholonomic.evidence.integrals import integral_evidence, integral_evidence_batch
-from nonholonomic.integration import (
+from nonholonomic.numerics import integration as integ
+from nonholonomic.numerics.integration import (
     IntegrationCancelled,
     IntegrationError,
     StepRecorder,
     Trajectory,
     integrate,
 )
-from nonholonomic.integration_batch import integrate_batch
-from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.numerics.integration_batch import integrate_batch
+from nonholonomic.numerics.kernels import numeric, parameter_vector
+from nonholonomic.numerics.taylor import taylor_system
 from nonholonomic.systems import SUPPORTED_POTENTIALS
-from nonholonomic.taylor import taylor_system
 
 KINDS = [(kind, potential) for kind, potentials in SUPPORTED_POTENTIALS.items() for potential in potentials]
 

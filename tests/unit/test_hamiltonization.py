@@ -10,9 +10,8 @@ import pytest
 import sympy as sp
 
 from nonholonomic import get_system, simulate
-from nonholonomic.brackets import chaplygin_ball_bracket, e3
 from nonholonomic.definition import cross, dot
-from nonholonomic.hamiltonization import (
+from nonholonomic.hamiltonization.forms import (
     POINTWISE_TOLERANCE,
     HamiltonianForm,
     flow_residual,
@@ -22,7 +21,8 @@ from nonholonomic.hamiltonization import (
     symbolic_flow_identity,
     time_density_spread,
 )
-from nonholonomic.kernels import parameter_vector, vectorize
+from nonholonomic.hamiltonization.poisson import chaplygin_ball_bracket, e3
+from nonholonomic.numerics.kernels import parameter_vector, vectorize
 from nonholonomic.systems import SYSTEMS, chaplygin_ball as ball, veselova as ves
 
 INERTIA = np.array([2.0, 3.0, 4.5])
@@ -127,7 +127,7 @@ def test_symbolic_identity_is_proven_with_parameters_symbolic(kind, potential):
 
 def test_symbolic_proof_past_max_proof_ops_is_undecided_with_the_limit_named():
     """Decided by the size of what the proof works on, not by seconds: not tried, the same words every time."""
-    from nonholonomic.hamiltonization import _flow_size
+    from nonholonomic.hamiltonization.forms import _flow_size
     from nonholonomic.work_limits import MAX_PROOF_OPS, WorkLimits
 
     system = get_system("veselova", "quadratic")

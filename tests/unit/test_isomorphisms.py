@@ -12,8 +12,8 @@ import sympy as sp
 
 from nonholonomic import isomorphisms as iso
 from nonholonomic.definition import dot
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import parameter_vector
 from nonholonomic.simulation import simulate
 from nonholonomic.systems import SYSTEMS, chaplygin_ball as ball, get_system, veselova_e3 as ve3
 

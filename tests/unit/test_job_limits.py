@@ -117,7 +117,7 @@ def test_a_cancelled_job_stops_at_its_next_progress_report(backend, monkeypatch)
     running = threading.Event()
 
     def integrating(request, progress):
-        from nonholonomic.integration import IntegrationCancelled
+        from nonholonomic.numerics.integration import IntegrationCancelled
 
         while progress(0.1):
             running.set()

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from nonholonomic.hamiltonization import flow_residual
-from nonholonomic.integration import integrate
+from nonholonomic.hamiltonization.forms import flow_residual
 from nonholonomic.lagrangian import derive, parse_system
 from nonholonomic.lagrangian.chaplygin import chaplygin_reduction
-from nonholonomic.lagrangian.measure import measure_verdict
+from nonholonomic.lagrangian.measure_search import measure_verdict
+from nonholonomic.numerics.integration import integrate
 from nonholonomic.systems import generalized_chaplygin as gc, lagrangian as lagrangian_kind
 from tests.lagrangian_examples import PARTICLE, SLEIGH
 

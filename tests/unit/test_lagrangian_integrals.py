@@ -1,4 +1,4 @@
-"""The search for integrals linear and quadratic in the velocities (nonholonomic.lagrangian.integrals): the
+"""The search for integrals linear and quadratic in the velocities (nonholonomic.lagrangian.integral_search): the
 energy is found in the ansatz (and equals E = (q_dot, dL/dq_dot) - L on the manifold); the known extra
 integrals are found (the nonholonomic particle without potential: y_dot and z y_dot - (1 + y^2) x_dot; the
 Suslov problem with the constraint along a principal axis: the body angular velocities omega_1, omega_2 and
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from nonholonomic.integration import integrate
 from nonholonomic.lagrangian import derive, parse_system
-from nonholonomic.lagrangian.integrals import NOT_EXHAUSTIVE, integral_search
+from nonholonomic.lagrangian.integral_search import NOT_EXHAUSTIVE, integral_search
+from nonholonomic.numerics.integration import integrate
 from nonholonomic.systems.lagrangian import define
 from tests.lagrangian_examples import PARTICLE, SLEIGH
 
@@ -207,7 +207,7 @@ def test_time_dependent_lagrangian_is_not_searched():
 def test_a_proof_past_its_work_limit_is_not_tried_and_says_so(monkeypatch):
     """The proofs are bounded by their size (MAX_PROOF_TERMS), not by a clock: past it the integral is listed
     unproven with the measure named, and the search is partial."""
-    from nonholonomic.lagrangian import integrals
+    from nonholonomic.lagrangian import integral_search as integrals
 
     monkeypatch.setattr(integrals, "MAX_PROOF_TERMS", 0)
     data = parse_system(dict(SLEIGH, parameters={"m": 1.1, "a": 0.3, "J": 0.2}))  # not searched before

@@ -1,4 +1,4 @@
-"""The invariant-measure search for a user's Lagrangian system (nonholonomic.lagrangian.measure): the
+"""The invariant-measure search for a user's Lagrangian system (nonholonomic.lagrangian.measure_search): the
 nonholonomic particle has √(1 + y²) dx dy dz dẋ dẏ, Chaplygin's sleigh has no measure ρ(q) (its
 obstruction is a·m·sin θ/(J + m a²), so with a = 0 it has one), an unconstrained system has Liouville's
 det M dq dq̇. Every ``found`` is re-checked here independently: div(ρ f) of the reduced flow simplified
@@ -11,7 +11,7 @@ import pytest
 import sympy as sp
 
 from nonholonomic.lagrangian import derive, parse_system
-from nonholonomic.lagrangian.measure import POINTWISE_TOLERANCE, measure_verdict
+from nonholonomic.lagrangian.measure_search import POINTWISE_TOLERANCE, measure_verdict
 from tests.lagrangian_examples import PARTICLE, SLEIGH
 
 #: No constraints, a mass matrix depending on q: det M = x²y² + 2y² + 2.

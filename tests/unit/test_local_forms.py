@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from nonholonomic import get_system, local_forms as lf, simulate
+from nonholonomic import get_system, simulate
+from nonholonomic.hamiltonization import local_forms as lf
 from nonholonomic.systems import SYSTEMS, chaplygin_ball as ball, veselova as ves
 
 R = sp.Rational

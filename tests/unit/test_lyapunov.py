@@ -11,8 +11,8 @@ import sympy as sp
 from nonholonomic import get_system
 from nonholonomic.analysis.lyapunov import Spectrum, largest_batch, reversing_involution, spectrum
 from nonholonomic.definition import InvariantMeasure, MechanicalSystem, StateConstraint, StateVector
-from nonholonomic.integration import IntegrationCancelled, IntegrationError
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.integration import IntegrationCancelled, IntegrationError
+from nonholonomic.numerics.kernels import parameter_vector
 
 x1, x2, x3 = sp.symbols("x1 x2 x3", real=True)
 X = StateVector("x", (x1, x2, x3), "state", "1")

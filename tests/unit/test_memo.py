@@ -26,8 +26,8 @@ import numpy as np
 from workers.disk_memo import install_disk_memo
 disk = install_disk_memo(sys.argv[1])
 from nonholonomic.evidence.measure import symbolic_divergence_vanishes
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import numeric, parameter_vector
 from nonholonomic.systems import get_system
 system = get_system("chaplygin_ball", "zero")
 p = parameter_vector(system, {"inertia": [1.0, 1.5, 2.0], "D": 1.0})

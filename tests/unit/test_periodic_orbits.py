@@ -14,8 +14,8 @@ from nonholonomic.analysis.chaos_map.grid import Grid, complete
 from nonholonomic.analysis.periodic_orbit import PeriodicOrbitError, find_periodic_orbit
 from nonholonomic.analysis.periodic_orbit.continuation import characteristic_signs, continue_orbit
 from nonholonomic.analysis.poincare import section
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import numeric, parameter_vector
 from nonholonomic.systems import get_system
 
 BALL = {"inertia": [2.0, 3.0, 4.5], "D": 0.7}

@@ -27,8 +27,8 @@ from nonholonomic.analysis.poincare import (
     section_batch,
     surface_names,
 )
-from nonholonomic.integration import IntegrationCancelled, IntegrationError, integrate
-from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.numerics.integration import IntegrationCancelled, IntegrationError, integrate
+from nonholonomic.numerics.kernels import numeric, parameter_vector
 from tests.reference import ball_rhs
 
 INERTIA = np.array([2.0, 3.0, 4.5])

@@ -16,9 +16,9 @@ import pytest
 import sympy as sp
 from scipy.integrate import solve_ivp
 
-from nonholonomic.brackets import generalized_chaplygin_bracket
-from nonholonomic.reducing_multiplier import hamiltonize, monopole_charge
-from nonholonomic.theorem_1 import prove_theorem_1
+from nonholonomic.hamiltonization.poisson import generalized_chaplygin_bracket
+from nonholonomic.hamiltonization.reducing_multiplier import hamiltonize, monopole_charge
+from nonholonomic.hamiltonization.theorem_1 import prove_theorem_1
 
 th, ph = sp.symbols("theta phi", real=True)
 thd, phd, psd = sp.symbols("thetadot phidot psidot", real=True)
@@ -294,7 +294,7 @@ def test_large_forms_are_not_given_to_sympys_integrate(ball):
     """sympy's integrate does not return on the ball's S_bar, and a thread cannot be stopped (it slowed
     every later computation of the process 5-fold, measured): decided by the form's size, it is not started."""
     from nonholonomic import bounded
-    from nonholonomic.monopole import SYMBOLIC_INTEGRAL_MAX_OPS
+    from nonholonomic.hamiltonization.monopole import SYMBOLIC_INTEGRAL_MAX_OPS
 
     result = ball
     out = monopole_charge(result.S_bar, Q, SPHERE, VALUES)
@@ -440,7 +440,7 @@ def test_a_density_with_floor_from_a_periodic_antiderivative_is_verified():
     sympy's antiderivative of 1/(2 + cos q1) holds floor((q1 - pi)/(2 pi)); the pointwise check of
     Theorem 1 differentiates it (0 away from the jumps) and must still evaluate, and pass."""
     from nonholonomic.expressions import declare_symbols, parse_expression
-    from nonholonomic.reducing_multiplier import hamiltonize
+    from nonholonomic.hamiltonization.reducing_multiplier import hamiltonize
 
     s = declare_symbols(["x", "y", "a", "b"])
     result = hamiltonize(parse_expression("(a**2 + (2 + cos(x))*b**2)/2", s), (s["x"], s["y"]), (s["a"], s["b"]),

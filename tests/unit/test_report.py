@@ -9,7 +9,8 @@ import re
 import pytest
 import sympy as sp
 
-from nonholonomic import bounded, local_forms as lf
+from nonholonomic import bounded
+from nonholonomic.hamiltonization import local_forms as lf
 from nonholonomic.report import claim_ids, paper_report
 from nonholonomic.report.verdict import CORRECTED, FAILS, HOLDS, UNRESOLVED, Check, judge
 from nonholonomic.systems import clebsch

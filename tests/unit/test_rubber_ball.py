@@ -14,7 +14,7 @@ from nonholonomic import simulate
 from nonholonomic.definition import InvariantMeasure, dot, symmetric_matrix_symbols, vector_symbols
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
 from nonholonomic.initial_state import initial_state_problems
-from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.numerics.kernels import numeric, parameter_vector
 from nonholonomic.systems import chaplygin_ball as cb, chaplygin_ball_veselova as bv, rubber_ball as rb, veselova
 
 INERTIA = np.array([2.0, 3.0, 4.5])

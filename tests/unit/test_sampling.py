@@ -8,7 +8,7 @@ import pytest
 from nonholonomic.analysis.sampling import RECIPES, LevelError, describe_sampling, fixable, on_level
 from nonholonomic.catalog import describe
 from nonholonomic.initial_state import vector_slice
-from nonholonomic.kernels import numeric, parameter_vector, state_vector
+from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector
 from nonholonomic.systems import SUPPORTED_POTENTIALS, SURFACE_KINDS, SYSTEMS, get_system
 
 #: Parameters of the potentials the catalog examples (all U = 0) do not give.

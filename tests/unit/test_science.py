@@ -23,7 +23,7 @@ import pytest
 from scipy.optimize import brentq
 
 from nonholonomic.analysis import lyapunov, poincare, sampling
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.kernels import parameter_vector
 from nonholonomic.systems import get_system
 
 _PATH = Path(__file__).resolve().parents[2] / "bench" / "science.py"

@@ -12,11 +12,11 @@ import sympy as sp
 from nonholonomic import get_system
 from nonholonomic.analysis.poincare import section
 from nonholonomic.analysis.poincare.surface import _surface_kernels, parse_surface
-from nonholonomic.integration import IntegrationError, Trajectory, integrate
-from nonholonomic.integration_batch import integrate_batch
-from nonholonomic.kernels import parameter_vector
+from nonholonomic.numerics.integration import IntegrationError, Trajectory, integrate
+from nonholonomic.numerics.integration_batch import integrate_batch
+from nonholonomic.numerics.kernels import parameter_vector
+from nonholonomic.numerics.taylor import taylor_system
 from nonholonomic.systems import SUPPORTED_POTENTIALS
-from nonholonomic.taylor import taylor_system
 
 BALL = get_system("chaplygin_ball", "zero")
 P_BALL = parameter_vector(BALL, {"inertia": [2.0, 3.0, 4.5], "D": 0.7})

@@ -14,8 +14,8 @@ from nonholonomic import get_system, simulate
 from nonholonomic.definition import InvariantMeasure, cross, dot, gradient
 from nonholonomic.evidence.measure import measure_evidence, pointwise_divergence_residual, symbolic_divergence_vanishes
 from nonholonomic.initial_state import initial_state_problems
-from nonholonomic.integration import integrate
-from nonholonomic.kernels import numeric, parameter_vector
+from nonholonomic.numerics.integration import integrate
+from nonholonomic.numerics.kernels import numeric, parameter_vector
 from nonholonomic.systems import veselova as ves
 
 INERTIA = np.array([2.0, 3.0, 4.5])

@@ -23,7 +23,7 @@ from nonholonomic.analysis.chaos_map import indicators
 from nonholonomic.analysis.ensemble import Member
 from nonholonomic.analysis.lyapunov import spectrum
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import IntegrationError, ProgressCallback
+from nonholonomic.numerics.integration import IntegrationError, ProgressCallback
 from nonholonomic.simulation import phase
 
 #: Fraction of a map's cells recomputed independently (at least one cell).

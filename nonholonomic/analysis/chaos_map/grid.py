@@ -39,7 +39,7 @@ from nonholonomic.analysis.poincare.surface import SurfaceError, parse_surface
 from nonholonomic.analysis.sampling import RECIPES, LevelError, fixable, on_level, verified
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import vector_slice
-from nonholonomic.kernels import NumericSystem, VectorKernel, numeric, vectorize
+from nonholonomic.numerics.kernels import NumericSystem, VectorKernel, numeric, vectorize
 from nonholonomic.refusals import RefusedField
 
 #: States drawn on the level to estimate the region it allows (the default ``ranges``).

@@ -22,7 +22,7 @@ import numpy as np
 from numpy.polynomial import polynomial as poly
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.kernels import NumericSystem
+from nonholonomic.numerics.kernels import NumericSystem
 
 #: A relation is linear where its second difference is below this (relative to its first).
 LINEAR_TOLERANCE = 1e-9

@@ -31,10 +31,10 @@ import numpy as np
 from nonholonomic.analysis.lyapunov.variational import initial_frame, thread_copy
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import integral_tolerance
-from nonholonomic.integration import MACHINE_EPSILON, IntegrationCancelled, IntegrationError, ProgressCallback
-from nonholonomic.integration_batch import lane_sources
-from nonholonomic.kernels import numeric
-from nonholonomic.taylor import taylor_system
+from nonholonomic.numerics.integration import MACHINE_EPSILON, IntegrationCancelled, IntegrationError, ProgressCallback
+from nonholonomic.numerics.integration_batch import lane_sources
+from nonholonomic.numerics.kernels import numeric
+from nonholonomic.numerics.taylor import taylor_system
 
 #: The indicators a map may ask for.
 INDICATORS = ("megno", "fli", "lyapunov")
@@ -131,7 +131,7 @@ def run_batch(system: MechanicalSystem, parameters: np.ndarray, initial_states: 
     ----------
     parameters : shape ``(members, n_parameters)``; initial_states: ``(members, dimension)``.
     progress : ``progress(fraction of members done) -> keep_going``; False raises
-        :class:`~nonholonomic.integration.IntegrationCancelled`.
+        :class:`~nonholonomic.numerics.integration.IntegrationCancelled`.
     work : the whole job's orbits × T (a map's, of which these members are a chunk), which picks the
         compilation mode (:func:`compact_for`); default these members'.
     """

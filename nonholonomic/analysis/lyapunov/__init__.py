@@ -73,14 +73,14 @@ from nonholonomic.analysis.lyapunov.zeros import (
     reversing_involution,
 )
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import (
+from nonholonomic.numerics.integration import (
     MACHINE_EPSILON,
     IntegrationCancelled,
     IntegrationError,
     ProgressCallback,
 )
-from nonholonomic.integration_batch import lane_sources
-from nonholonomic.taylor import taylor_system
+from nonholonomic.numerics.integration_batch import lane_sources
+from nonholonomic.numerics.taylor import taylor_system
 
 __all__ = [
     "CONVERGENCE_WARNING",

@@ -18,7 +18,7 @@ import numpy as np
 
 from nonholonomic.analysis.lyapunov.zeros import ExpectedZero, expected_zeros
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.kernels import numeric
+from nonholonomic.numerics.kernels import numeric
 
 #: At most this many rows of the running estimates are kept (evenly thinned, last one always).
 MAX_CONVERGENCE_ROWS = 1000

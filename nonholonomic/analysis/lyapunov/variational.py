@@ -24,8 +24,8 @@ import numpy as np
 from scipy.linalg.lapack import dgeqrf, dorgqr
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import IntegrationError
-from nonholonomic.taylor import taylor_system
+from nonholonomic.numerics.integration import IntegrationError
+from nonholonomic.numerics.taylor import taylor_system
 
 #: Seed of the fixed (reproducible) random orthonormal frame the tangent vectors start from.
 FRAME_SEED = 1980

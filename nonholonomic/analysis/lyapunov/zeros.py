@@ -19,7 +19,7 @@ import sympy as sp
 
 from nonholonomic.analysis.lyapunov.variational import FRAME_SEED
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.kernels import VectorKernel, numeric, vectorize
+from nonholonomic.numerics.kernels import VectorKernel, numeric, vectorize
 
 #: Relative tolerance of the numerical rank of the integrals' gradients (normalised rows).
 RANK_TOLERANCE = 1e-7

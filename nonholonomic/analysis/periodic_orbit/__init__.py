@@ -52,8 +52,8 @@ from nonholonomic.analysis.poincare.request import _validate
 from nonholonomic.analysis.poincare.surface import SurfaceError
 from nonholonomic.analysis.sampling import fixable
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE, IntegrationError, integrate
-from nonholonomic.kernels import numeric
+from nonholonomic.numerics.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE, IntegrationError, integrate
+from nonholonomic.numerics.kernels import numeric
 from nonholonomic.refusals import RefusedField
 
 #: A solution whose Jacobian's singular values have a ratio below this lies on a family of periodic orbits.

@@ -23,7 +23,7 @@ import numpy as np
 
 from nonholonomic.analysis.periodic_orbit import PeriodicOrbit, refine
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import IntegrationError
+from nonholonomic.numerics.integration import IntegrationError
 
 
 @dataclass(frozen=True)

@@ -38,9 +38,9 @@ import sympy as sp
 from nonholonomic.analysis.lyapunov.variational import _integrator
 from nonholonomic.analysis.poincare.surface import parse_surface
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import IntegrationCancelled, IntegrationError
-from nonholonomic.kernels import VectorKernel, numeric, vectorize
-from nonholonomic.taylor import taylor_system
+from nonholonomic.numerics.integration import IntegrationCancelled, IntegrationError
+from nonholonomic.numerics.kernels import VectorKernel, numeric, vectorize
+from nonholonomic.numerics.taylor import taylor_system
 
 #: Newton stops when the scaled residual is below this (relative to the state's size) ...
 TARGET = 1e-13

@@ -74,13 +74,13 @@ from nonholonomic.analysis.poincare.surface import (
     surface_scale_of,
 )
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import (
+from nonholonomic.numerics.integration import (
     MACHINE_EPSILON,
     IntegrationCancelled,
     IntegrationError,
     ProgressCallback,
 )
-from nonholonomic.taylor import TaylorSystem
+from nonholonomic.numerics.taylor import TaylorSystem
 
 __all__ = [
     "DIRECTIONS",

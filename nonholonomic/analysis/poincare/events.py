@@ -24,7 +24,7 @@ import sympy as sp
 
 from nonholonomic.analysis.poincare.surface import _heyoka_ready, _Prepared
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.taylor import taylor_system
+from nonholonomic.numerics.taylor import taylor_system
 
 _HEYOKA_DIRECTION = {
     "increasing": hy.event_direction.positive,

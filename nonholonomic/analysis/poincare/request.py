@@ -14,7 +14,7 @@ import sympy as sp
 
 from nonholonomic.analysis.poincare.surface import SurfaceError, _prepare, _Prepared
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import MACHINE_EPSILON
+from nonholonomic.numerics.integration import MACHINE_EPSILON
 
 #: ``increasing``: S − value goes from negative to positive; ``decreasing``: the reverse; ``both``.
 DIRECTIONS = ("increasing", "decreasing", "both")

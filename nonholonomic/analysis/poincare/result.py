@@ -23,7 +23,7 @@ import numpy as np
 
 from nonholonomic.analysis.poincare.request import _Request
 from nonholonomic.analysis.poincare.surface import _scale
-from nonholonomic.integration import MACHINE_EPSILON
+from nonholonomic.numerics.integration import MACHINE_EPSILON
 
 #: The Newton correction of a crossing time is accepted up to this many ``eps·max(|t|, h_max)``.
 NEWTON_BOUND = 64.0

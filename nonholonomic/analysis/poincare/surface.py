@@ -27,8 +27,8 @@ import sympy as sp
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.expressions import ExpressionError, integrable, parse_expression
+from nonholonomic.numerics.taylor import TaylorSystem, taylor_system
 from nonholonomic.refusals import RefusedField
-from nonholonomic.taylor import TaylorSystem, taylor_system
 
 _NOT_SMOOTH = re.compile(r"\b(abs|sign)\s*\(")
 
@@ -151,9 +151,9 @@ class _SurfaceKernels:
     ``δ = (value − S) / (dS/dt)`` (``dS/dt = ∇S·f``), the flow ``f`` (n), ``ρ`` if the system has a
     reduced time, ``S − value``, the derived vectors' components, the integrals, their scales and the
     surface's natural scale ``Σ_i |∂S/∂x_i| · |v(i)|`` (see :func:`surface_scale_of`). The parameters
-    are the system's runtime parameter vector (:meth:`~nonholonomic.taylor.TaylorSystem.runtime_parameters`),
+    are the system's runtime parameter vector (:meth:`~nonholonomic.numerics.taylor.TaylorSystem.runtime_parameters`),
     then ``value``; the expressions are the symbolic ones, translated as the integrator's right-hand
-    side is (:mod:`nonholonomic.taylor`). ``slices`` are the state vectors' columns.
+    side is (:mod:`nonholonomic.numerics.taylor`). ``slices`` are the state vectors' columns.
     """
 
     n: int

@@ -49,7 +49,7 @@ import sympy as sp
 
 from nonholonomic.definition import MechanicalSystem, cross, dot
 from nonholonomic.evidence.measure import CheckEvidence
-from nonholonomic.kernels import VectorKernel, vectorize
+from nonholonomic.numerics.kernels import VectorKernel, vectorize
 from nonholonomic.systems import chaplygin_ball as _ball, veselova as _ves
 
 #: Pointwise relative residual accepted as round-off.

@@ -1,6 +1,6 @@
 """Theorem 1's density ρ(q): ∂ ln ρ/∂q₁ = A₂, ∂ ln ρ/∂q₂ = −A₁ (proof of Theorem 1), found three ways.
 
-In turn (each run to its end by :func:`nonholonomic.reducing_multiplier.hamiltonize`, which first
+In turn (each run to its end by :func:`nonholonomic.hamiltonization.reducing_multiplier.hamiltonize`, which first
 checks its size against the deterministic limits of :mod:`nonholonomic.work_limits`): an
 ansatz ρ = Π fⱼ^kⱼ exp(α·q) over the irreducible factors of A₁, A₂ and det G, exponents fitted at random
 points, rationalized and proved exactly (:func:`_density_ansatz`); sympy's ``integrate``

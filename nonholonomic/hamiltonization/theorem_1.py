@@ -1,10 +1,10 @@
 """Theorem 1 for *arbitrary* data: the symbolic half of the verification of
-:func:`nonholonomic.reducing_multiplier.hamiltonize`.
+:func:`nonholonomic.hamiltonization.reducing_multiplier.hamiltonize`.
 
 For any G (symmetric), w, V, a₁, a₂, b of (q₁, q₂) and any N solving the density's equations
 ∂N/∂q₁ = N A₂, ∂N/∂q₂ = −N A₁, the τ-flow of eq. (2704-7) in (q, p = N ∂L/∂q̇) is the Hamiltonian field of
 H̄ = H(q, p/N) with the bracket (2704-9), S̄ = N B (ERRATA 6; the printed proof's S̄ = B fails, and so does the
-opposite sign convention of :mod:`nonholonomic.brackets`). Also the 2×2 helpers both modules use.
+opposite sign convention of :mod:`nonholonomic.hamiltonization.poisson`). Also the 2×2 helpers both modules use.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from functools import lru_cache
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
-from nonholonomic.brackets import generalized_chaplygin_bracket
+from nonholonomic.hamiltonization.poisson import generalized_chaplygin_bracket
 
 __all__ = ["flow_fields", "prove_theorem_1"]
 

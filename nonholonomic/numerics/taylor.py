@@ -41,7 +41,7 @@ import sympy as sp
 
 from nonholonomic import memo
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.numpy_function import lambdify_numpy
+from nonholonomic.numerics.numpy_function import lambdify_numpy
 
 #: A sum whose expansion has more monomials than this keeps the structure it was written in.
 MAX_EXPANDED_TERMS = 400

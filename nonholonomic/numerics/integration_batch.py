@@ -1,10 +1,10 @@
 """Many members of one system at once: heyoka's batch mode (``hy.recommended_simd_size()`` SIMD lanes).
 
-The batch path beside :mod:`nonholonomic.integration` (one orbit) and on its integrators: each member gets the
-:class:`~nonholonomic.integration.Trajectory` the one-orbit path would give it, and a member whose lane fails is
-integrated alone to say why. With ``check_points`` (what an ensemble chunk asks for) the states the evidence is
-computed at are equally spaced check points written by heyoka with the samples, not every accepted step: no Python
-call per step.
+The batch path beside :mod:`nonholonomic.numerics.integration` (one orbit) and on its integrators: each member
+gets the :class:`~nonholonomic.numerics.integration.Trajectory` the one-orbit path would give it, and a member
+whose lane fails is integrated alone to say why. With ``check_points`` (what an ensemble chunk asks for) the
+states the evidence is computed at are equally spaced check points written by heyoka with the samples, not every
+accepted step: no Python call per step.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from collections.abc import Container
 import heyoka as hy
 import numpy as np
 
-from nonholonomic import integration  # FIRST_SEGMENT_STEPS read at run time (tests change it)
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.integration import (
+from nonholonomic.numerics import integration  # FIRST_SEGMENT_STEPS read at run time (tests change it)
+from nonholonomic.numerics.integration import (
     _GOING,
     MACHINE_EPSILON,
     IntegrationCancelled,
@@ -32,7 +32,7 @@ from nonholonomic.integration import (
     _taylor,
     _versions,
 )
-from nonholonomic.taylor import TaylorSystem
+from nonholonomic.numerics.taylor import TaylorSystem
 
 
 def lane_sources(count: int, failed: Container[int], lanes: int) -> list[int] | None:
@@ -78,7 +78,7 @@ def integrate_batch(
         they are the states at ``k`` equally spaced times ``linspace(0, t_final, k)``, written by heyoka's
         dense output inside ``propagate_grid`` with the samples (no Python per step; the integrals' worst
         drift over an ensemble is the same, see :data:`nonholonomic.analysis.ensemble.CHECK_POINTS`). A
-        batch not finished within :data:`~nonholonomic.integration.FIRST_SEGMENT_STEPS` steps is run
+        batch not finished within :data:`~nonholonomic.numerics.integration.FIRST_SEGMENT_STEPS` steps is run
         again with the step log (its points: the steps).
     progress : ``progress(fraction of members done) -> keep_going``, called after each batch and
         between the segments of a long run; False cancels (raises :class:`IntegrationCancelled`).
@@ -137,7 +137,7 @@ def _trajectory(lane: _Lane, common: tuple[object, ...]) -> Trajectory:
 
 class _BatchRun:
     """The members of one :func:`integrate_batch` call, one batch integrator's lanes at a time. Short
-    runs (every lane at ``t_final`` within :data:`~nonholonomic.integration.FIRST_SEGMENT_STEPS` steps: an
+    runs (every lane at ``t_final`` within :data:`~nonholonomic.numerics.integration.FIRST_SEGMENT_STEPS` steps: an
     ensemble's common case) keep their step records in one log of the call and are finished all together
     (:meth:`finish`: a few array operations in all instead of a few dozen per batch); long runs and failures batch by
     batch."""
@@ -260,7 +260,8 @@ class _BatchRun:
     def run_checked(self, short: tuple[int, int, float] | None) -> tuple[list[_Lane] | None, list[int]] | None:
         """One batch through ``propagate_grid`` alone (the state, parameters and time set by :meth:`run`),
         the check points among the grid's times; None when a lane is still short of ``t_final`` after
-        :data:`~nonholonomic.integration.FIRST_SEGMENT_STEPS` steps (then :meth:`run` goes on with the step log)."""
+        :data:`~nonholonomic.numerics.integration.FIRST_SEGMENT_STEPS` steps (then :meth:`run` goes on with the
+        step log)."""
         ta, n = self.ta, self.ts.n_state
         _, out = ta.propagate_grid(self.lane_grid, max_steps=integration.FIRST_SEGMENT_STEPS)
         res = ta.propagate_res  # a new list of tuples at each access

@@ -64,7 +64,7 @@ def _reduced_text(reduction: ChaplyginReduction) -> dict[str, Any]:
     texts = dict(data.texts)
     return {"shape": [str(s) for s in data.q],
             "cyclic_velocities": {str(s): sp.sstr(e) for s, e in reduction.dependent},
-            "L_star": texts["lagrangian"], "U": texts["potential"], "a1": texts["a1"], "a2": texts["a2"],
+            "L_star": texts["L"], "U": texts["potential"], "a1": texts["a1"], "a2": texts["a2"],
             "b": texts["b"], "equation": "2704-7"}
 
 
@@ -158,7 +158,7 @@ def hamiltonization(data: LagrangianData) -> Hamiltonization:
 
     The reduction, the field comparison and Theorem 1 run to their end (:func:`nonholonomic.bounded.run`);
     their sizes are bounded by deterministic limits (``CANCEL_OPS``, the work limits of
-    :func:`nonholonomic.reducing_multiplier.hamiltonize`), so the verdict is the same on every machine.
+    :func:`nonholonomic.hamiltonization.reducing_multiplier.hamiltonize`), so the verdict is the same on every machine.
 
     Parameters
     ----------

@@ -29,7 +29,7 @@ In the new momenta p = ∂L̄/∂q′ = N P the equations are
     dx/dτ = {x, H̄},    {q_i, p_j} = δ_ij,  {p₁, p₂} = S̄(q),  {q₁, q₂} = 0     (2704-9)
 
 with H̄(q, p) = H(q, p/N) the energy. That is Theorem 1's convention dx/dτ = {x, H̄} = P∇H̄; the
-e(3) sections (and :mod:`nonholonomic.brackets`, dx/dτ = {H, x} = −P∇H) use the opposite one, in
+e(3) sections (and :mod:`nonholonomic.hamiltonization.poisson`, dx/dτ = {H, x} = −P∇H) use the opposite one, in
 which the same flow is ``−hamiltonian_vector_field(H̄)``, i.e. needs the bracket (2704-9) with the
 opposite sign. The verification computes both and says which holds.
 
@@ -47,8 +47,8 @@ not called). Identities rational in sin qᵢ, cos qᵢ are decided exactly by th
 t = tan(q/2) and an expanded numerator; numeric checks run at 40 digits.
 
 This module is the front door: the density's three searches are in
-:mod:`nonholonomic.reducing_multiplier_density`, the monopole integral in :mod:`nonholonomic.monopole`,
-the exact trigonometric decision in :mod:`nonholonomic.rational_trig`.
+:mod:`nonholonomic.hamiltonization.reducing_multiplier_density`, the monopole integral in
+:mod:`nonholonomic.hamiltonization.monopole`, the exact trigonometric decision in :mod:`nonholonomic.rational_trig`.
 """
 
 from __future__ import annotations
@@ -62,10 +62,9 @@ import numpy as np
 import sympy as sp
 
 from nonholonomic import bounded, work_limits
-from nonholonomic.brackets import PoissonStructure, generalized_chaplygin_bracket
-from nonholonomic.monopole import SYMBOLIC_INTEGRAL_MAX_OPS, monopole_charge
-from nonholonomic.rational_trig import rational_trig_is_zero
-from nonholonomic.reducing_multiplier_density import (
+from nonholonomic.hamiltonization.monopole import SYMBOLIC_INTEGRAL_MAX_OPS, monopole_charge
+from nonholonomic.hamiltonization.poisson import PoissonStructure, generalized_chaplygin_bracket
+from nonholonomic.hamiltonization.reducing_multiplier_density import (
     BASE_POINT,
     _density_ansatz,
     _density_by_integration,
@@ -73,7 +72,8 @@ from nonholonomic.reducing_multiplier_density import (
     _density_line_integral,
     _reduce_cos_squares,
 )
-from nonholonomic.theorem_1 import adj2, det2, prove_theorem_1
+from nonholonomic.hamiltonization.theorem_1 import adj2, det2, prove_theorem_1
+from nonholonomic.rational_trig import rational_trig_is_zero
 from nonholonomic.work_limits import WorkLimits, operations, over
 
 __all__ = ["EQUATIONS", "ReducingMultiplierResult", "hamiltonize", "monopole_charge",
@@ -384,7 +384,7 @@ def _pointwise_flow(L: sp.Expr, q: tuple[sp.Symbol, sp.Symbol], v: tuple[sp.Symb
 
     Evaluated in stages (q̈ from eq. 2704-7; p = N ∂L/∂q̇ and its derivatives; then the field of H̄
     at (q, p)) so that no expression is substituted into another: the same quantities as
-    :func:`nonholonomic.theorem_1.flow_fields`, without the expression swell."""
+    :func:`nonholonomic.hamiltonization.theorem_1.flow_fields`, without the expression swell."""
     G = sp.Matrix(2, 2, lambda i, j: sp.diff(L, v[i], v[j]))
     rhs = (sp.Matrix([v[1] * S, -v[0] * S]) + sp.Matrix([sp.diff(L, qi) for qi in q])
            - sp.Matrix(2, 2, lambda i, j: sp.diff(L, v[i], q[j])) * sp.Matrix(v))

@@ -1,6 +1,6 @@
 """Integrating a system: heyoka's Taylor method (default) or scipy's DOP853 (cross-check).
 
-The heyoka integrator is generated from the symbolic right-hand side (:mod:`nonholonomic.taylor`),
+The heyoka integrator is generated from the symbolic right-hand side (:mod:`nonholonomic.numerics.taylor`),
 with the parameters as runtime parameters (``hy.par``), so one compiled integrator serves every
 parameter value; it is compiled once per (system, tolerance) and process, and copied once per
 thread. Where the system has a reduced time ``τ = ∫ ρ dt``, it is integrated as one more state
@@ -20,7 +20,7 @@ The run is cut into segments, with no Python code per step where heyoka can do t
 Progress and cancellation are checked between segments; memory is bounded (one segment's Taylor
 coefficients, at most :data:`MAX_RECORDED_STEPS` recorded steps).
 
-:func:`nonholonomic.integration_batch.integrate_batch` integrates many members at once with heyoka's
+:func:`nonholonomic.numerics.integration_batch.integrate_batch` integrates many members at once with heyoka's
 batch mode (``taylor_adaptive_batch``, one member per SIMD lane), the same way or, for an ensemble,
 with equally spaced check points instead of the step log.
 """
@@ -40,8 +40,8 @@ import heyoka as hy
 import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.kernels import numeric
-from nonholonomic.taylor import TaylorSystem, taylor_system
+from nonholonomic.numerics.kernels import numeric
+from nonholonomic.numerics.taylor import TaylorSystem, taylor_system
 
 MACHINE_EPSILON = float(np.finfo(float).eps)
 #: DOP853 cannot honour tolerances much below this.
@@ -207,7 +207,7 @@ _taylor_by_id: dict[int, tuple[MechanicalSystem, TaylorSystem]] = {}
 
 
 def _taylor(system: MechanicalSystem) -> TaylorSystem:
-    """:func:`~nonholonomic.taylor.taylor_system`, looked up by the system's identity."""
+    """:func:`~nonholonomic.numerics.taylor.taylor_system`, looked up by the system's identity."""
     hit = _taylor_by_id.get(id(system))
     if hit is None or hit[0] is not system:
         if len(_taylor_by_id) > 256:

@@ -18,7 +18,7 @@ import sympy as sp
 
 from nonholonomic import memo
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.numpy_function import lambdify_numpy
+from nonholonomic.numerics.numpy_function import lambdify_numpy
 
 VectorKernel = Callable[[np.ndarray, np.ndarray], np.ndarray]
 T = TypeVar("T")

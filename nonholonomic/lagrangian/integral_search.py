@@ -2,7 +2,7 @@
 ansatz on its constraint manifold and each proven symbolically.
 
 On the manifold q̇ = B̃(q) u / Δ(q) (u the independent velocities, chosen as in
-:mod:`nonholonomic.lagrangian.measure`; Δ the determinant of the k × k minor of A solved for the others,
+:mod:`nonholonomic.lagrangian.measure_search`; Δ the determinant of the k × k minor of A solved for the others,
 1 when constant) the ansatz is F = Σ_μ b_μ(q) u^μ / Δ^|μ| over the monomials u^μ of degree ≤ 2, each b_μ in
 the span of products, of total degree ≤ D, of powers of the coordinates appearing polynomially and of
 1, cos θ, sin θ, sin²θ, sin θ cos θ (degrees 0, 1, 1, 2, 2) of those appearing inside sin/cos; a cyclic
@@ -37,7 +37,7 @@ from sympy.polys.rings import PolyElement
 
 from nonholonomic import bounded
 from nonholonomic.lagrangian.equations import derive
-from nonholonomic.lagrangian.measure import _dependent_columns, _Failed
+from nonholonomic.lagrangian.measure_search import _dependent_columns, _Failed
 from nonholonomic.lagrangian.parse import LagrangianData
 
 __all__ = ["MAX_PROOF_TERMS", "NOT_EXHAUSTIVE", "Integral", "IntegralSearch", "integral_search"]

@@ -1,7 +1,7 @@
 """The structural evidence of a job: Hamiltonian form after the time substitution (``bracket``) and
 the Euler-angle local forms (``euler_angles``), for the kinds the paper gives them for.
 
-The heavy modules (:mod:`nonholonomic.hamiltonization`, :mod:`nonholonomic.local_forms`,
+The heavy modules (:mod:`nonholonomic.hamiltonization.forms`, :mod:`nonholonomic.hamiltonization.local_forms`,
 :mod:`nonholonomic.evidence.brackets`) are imported when a job asks for these checks.
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.measure import CheckEvidence
-from nonholonomic.kernels import VectorKernel, vectorize
+from nonholonomic.numerics.kernels import VectorKernel, vectorize
 
 #: Kinds with a Hamiltonian form after a time substitution (paper: eq. 2504-10-2, 2604-5..7).
 HAMILTONIAN_KINDS = frozenset({"veselova", "chaplygin_ball"})
@@ -40,7 +40,7 @@ def _thin(states: np.ndarray) -> np.ndarray:
 
 @lru_cache(maxsize=32)
 def _to_bracket_variables(system: MechanicalSystem) -> tuple[VectorKernel, tuple[int, ...]]:
-    from nonholonomic.hamiltonization import hamiltonian_form
+    from nonholonomic.hamiltonization.forms import hamiltonian_form
 
     form = hamiltonian_form(system)
     if form is None:
@@ -60,7 +60,7 @@ def bracket_evidence(system: MechanicalSystem, parameters: np.ndarray, states: n
     """The time-substituted flow against the Hamiltonian vector field (and its control in time t),
     then the bracket itself (Jacobi identity, Casimirs, rank) at the mapped states."""
     from nonholonomic.evidence.brackets import structure_evidence
-    from nonholonomic.hamiltonization import hamiltonian_form, hamiltonian_form_evidence
+    from nonholonomic.hamiltonization.forms import hamiltonian_form, hamiltonian_form_evidence
 
     points = _thin(states)
     if hamiltonian_form(system) is None:  # a user's system without Theorem 1's multiplier
@@ -76,6 +76,6 @@ def bracket_evidence(system: MechanicalSystem, parameters: np.ndarray, states: n
 
 def euler_angle_evidence(system: MechanicalSystem, parameters: np.ndarray, states: np.ndarray) -> list[CheckEvidence]:
     """The local forms in Euler angles against the vector forms at the job's states."""
-    from nonholonomic.local_forms import local_form_evidence
+    from nonholonomic.hamiltonization.local_forms import local_form_evidence
 
     return local_form_evidence(system, parameters, _thin(states))

@@ -3,7 +3,7 @@
 A smooth closed 2-form on a compact surface is exact iff its integral vanishes; :func:`monopole_charge`
 integrates it over an angle chart (scipy's ``dblquad``, and sympy's exact integral for forms of at most
 :data:`SYMBOLIC_INTEGRAL_MAX_OPS` operations, run to its end). Part of Theorem 1's result
-(:func:`nonholonomic.reducing_multiplier.hamiltonize`).
+(:func:`nonholonomic.hamiltonization.reducing_multiplier.hamiltonize`).
 """
 
 from __future__ import annotations

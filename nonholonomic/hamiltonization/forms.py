@@ -24,7 +24,7 @@
    energy (2504-2)" means (2604-2) (ERRATA 5). H is ½(L, adj(I_Q) L) + U = ½(M, I_Q⁻¹M) + U.
 
 Sign convention (the paper's, ERRATA 4): dx_i/dτ = {H, x_i} = −(P ∇H)_i with P_ij = {x_i, x_j}, as in
-:meth:`nonholonomic.brackets.PoissonStructure.hamiltonian_vector_field`.
+:meth:`nonholonomic.hamiltonization.poisson.PoissonStructure.hamiltonian_vector_field`.
 
 The potential U(γ) is read off the system's own energy integral, U = E|_(velocity = 0) (the kinetic
 energy is a quadratic form in ω, resp. M), so no potential is written twice and every potential of
@@ -58,10 +58,10 @@ import numpy as np
 import sympy as sp
 
 from nonholonomic import bounded, work_limits
-from nonholonomic.brackets import PoissonStructure, chaplygin_ball_bracket, e3
 from nonholonomic.definition import MechanicalSystem, dot
 from nonholonomic.evidence.measure import CheckEvidence
-from nonholonomic.kernels import VectorKernel, numeric, vectorize
+from nonholonomic.hamiltonization.poisson import PoissonStructure, chaplygin_ball_bracket, e3
+from nonholonomic.numerics.kernels import VectorKernel, numeric, vectorize
 from nonholonomic.work_limits import WorkLimits, operations, over
 
 #: Pointwise relative residual accepted as round-off.
