@@ -169,11 +169,10 @@ class Access:
 
 
 async def caller(request: Request) -> str | None:
-    """FastAPI dependency: the caller's owner id (see :meth:`Access.owner`), kept on ``request.state``.
-    Async, because it does not block: a sync dependency would cost every request a trip through the
-    thread pool."""
-    owner = request.app.state.access.owner(request)
-    request.state.owner = owner
+    """FastAPI dependency: the caller's owner id (see :meth:`Access.owner`); routes take it as
+    :data:`service.deps.Owner` (resolved once per request). Async, because it does not block: a sync
+    dependency would cost every request a trip through the thread pool."""
+    owner: str | None = request.app.state.access.owner(request)
     return owner
 
 
