@@ -28,9 +28,12 @@ class RefusedField(ValueError):
     """
 
     def __init__(self, field: str, reason: str, position: int | None = None) -> None:
-        where = f" (at position {position})" if position is not None else ""
-        super().__init__(f"{field}: {reason}{where}")
         self.field, self.reason, self.position = field, reason, position
+        super().__init__(self._message())
+
+    def _message(self) -> str:
+        where = f" (at position {self.position})" if self.position is not None else ""
+        return f"{self.field}: {self.reason}{where}"
 
     def __reduce__(self) -> tuple[Any, ...]:  # subclasses keep their class across processes
         return (_rebuild, (type(self), self.__dict__))
@@ -50,10 +53,11 @@ class RefusedFields(RefusedField):
     def __init__(self, problems: Sequence[tuple[str, str]], position: int | None = None) -> None:
         if not problems:
             raise ValueError("a refusal names at least one field")
-        first_field, first_reason = problems[0]
-        super().__init__(first_field, first_reason, position)
-        self.args = ("; ".join(f"{f}: {r}" for f, r in problems),)
         self.all = list(problems)
+        super().__init__(*problems[0], position)
+
+    def _message(self) -> str:
+        return "; ".join(f"{f}: {r}" for f, r in self.all)
 
     def problems(self) -> list[tuple[str, str]]:
         return list(self.all)
@@ -66,9 +70,5 @@ def _join(block: str, field: str) -> str:
 def _rebuild(cls: type[RefusedField], state: dict[str, Any]) -> RefusedField:
     refusal = cls.__new__(cls)
     refusal.__dict__.update(state)
-    if isinstance(refusal, RefusedFields):
-        refusal.args = ("; ".join(f"{f}: {r}" for f, r in refusal.all),)
-    else:
-        where = f" (at position {refusal.position})" if refusal.position is not None else ""
-        refusal.args = (f"{refusal.field}: {refusal.reason}{where}",)
+    refusal.args = (refusal._message(),)
     return refusal

@@ -8,7 +8,9 @@ names are read as the new ones (stored, and answered, in the new names) and the 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
+
+from pydantic import BaseModel, ModelWrapValidatorHandler, PrivateAttr, model_validator
 
 #: The request fields renamed: old name → new name.
 RENAMED_FIELDS = {"lagrangian": "L"}
@@ -39,3 +41,26 @@ def renamed(data: Any, renames: dict[str, str], where: str) -> tuple[Any, list[s
         notes.append(f"{where}{old} is deprecated: it is now {where}{new}, as for every system written by the "
                      f"user (L, q, q_dot); {REMOVAL}")
     return data, notes
+
+
+class FormerFieldNames(BaseModel):
+    """A request model that still reads the former names of some of its fields: ``former_fields`` (old → new),
+    at ``former_fields_at`` in the request (``system.``); the notes are kept for the answer."""
+
+    former_fields: ClassVar[dict[str, str]] = {}
+    former_fields_at: ClassVar[str] = ""
+    _deprecations: list[str] = PrivateAttr(default_factory=list)
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _former_names(cls, data: Any, handler: ModelWrapValidatorHandler[FormerFieldNames]) -> Any:
+        notes: list[str] = []
+        if cls.former_fields:
+            data, notes = renamed(data, cls.former_fields, cls.former_fields_at)
+        model = handler(data)
+        model._deprecations = notes
+        return model
+
+    def deprecations(self) -> list[str]:
+        """Notes on the deprecated names this model was sent with (empty if none)."""
+        return list(self._deprecations)

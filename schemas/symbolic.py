@@ -10,13 +10,13 @@ seconds. ``budget_s`` is deprecated and ignored (the answer's ``deprecations`` s
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ModelWrapValidatorHandler, PrivateAttr, Strict, model_validator
+from pydantic import BaseModel, ConfigDict, Field, Strict, model_validator
 
 from nonholonomic import work_limits
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE
-from schemas.deprecations import RENAMED_FIELDS, renamed
+from schemas.deprecations import RENAMED_FIELDS, FormerFieldNames
 
 #: A named constant's value (as a system parameter's: beyond, the pointwise checks overflow).
 Constant = Annotated[float, Strict(), Field(allow_inf_nan=False, ge=-MAX_PARAMETER_MAGNITUDE,
@@ -115,11 +115,12 @@ class MonopoleRequest(BaseModel):
                     "The integrated form is then S_bar + dW2/dq1 - dW1/dq2")
 
 
-class HamiltonizeRequest(BaseModel):
+class HamiltonizeRequest(FormerFieldNames):
     """A generalized Chaplygin system with two degrees of freedom (eq. 2704-7). ``lagrangian`` is the old name
     of ``L`` (still read, with a note in the answer's ``deprecations``: :mod:`schemas.deprecations`)."""
 
     model_config = ConfigDict(extra="forbid")
+    former_fields: ClassVar[dict[str, str]] = RENAMED_FIELDS
 
     L: Expression = Field(description="L(q1, q2, q1_dot, q2_dot), quadratic in the velocities; formerly "
                                       "`lagrangian` (still read, deprecated)")
@@ -135,20 +136,6 @@ class HamiltonizeRequest(BaseModel):
     budget_s: float | None = Field(None, gt=0, le=MAX_BUDGET_S, deprecated=True, description=_BUDGET_S_DESCRIPTION)
     monopole: MonopoleRequest | None = Field(
         None, description="integrate S_bar dq1^dq2 over a chart: exact (integral 0) or a monopole")
-    #: Notes on the old names the request used.
-    _renamed: list[str] = PrivateAttr(default_factory=list)
-
-    @model_validator(mode="wrap")
-    @classmethod
-    def _old_names(cls, data: Any, handler: ModelWrapValidatorHandler[HamiltonizeRequest]) -> Any:
-        data, notes = renamed(data, RENAMED_FIELDS, "")
-        request = handler(data)
-        request._renamed = notes
-        return request
-
-    def renamed_fields(self) -> list[str]:
-        """Notes on the old names this request used (empty if none)."""
-        return list(self._renamed)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -17,13 +17,10 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
-    ModelWrapValidatorHandler,
-    PrivateAttr,
     Strict,
     ValidationInfo,
     create_model,
     field_validator,
-    model_validator,
 )
 
 from nonholonomic.definition import MAX_PARAMETER_MAGNITUDE, MIN_POSITIVE_PARAMETER, MechanicalSystem, Parameter
@@ -46,7 +43,7 @@ from nonholonomic.systems import (
 )
 from nonholonomic.systems.ball_on_surface import SURFACE_VARIABLES, Surface, surface
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE as GENERALIZED_CHAPLYGIN_EXAMPLE
-from schemas.deprecations import RENAMED_FIELDS, RENAMED_STATE, renamed
+from schemas.deprecations import RENAMED_FIELDS, RENAMED_STATE, FormerFieldNames, renamed
 
 FiniteFloat = Annotated[float, Strict(), Field(allow_inf_nan=False)]
 #: ``step(fields)``: the validation is about to read these fields (the safety cap names them if it stops the check).
@@ -257,7 +254,7 @@ class SurfaceSpec(BaseModel):
         return surface(self.Phi, tuple(sorted(self.parameters)))
 
 
-class SystemSpec(BaseModel):
+class SystemSpec(FormerFieldNames):
     """Base of the system models: ``kind``, the system's parameters and ``potential`` (and, for a ball
     on a surface of the user's own, ``surface``)."""
 
@@ -265,12 +262,6 @@ class SystemSpec(BaseModel):
     # kind, potential (and surface) are fields of each kind's own model, added by create_model (_system_model)
     #: Former names of this kind's state vectors, still read (old → new; schemas.deprecations).
     renamed_state: ClassVar[dict[str, str]] = {}
-    #: Notes on the old names the request used (schemas.deprecations).
-    _deprecations: list[str] = PrivateAttr(default_factory=list)
-
-    def deprecations(self) -> list[str]:
-        """Notes on the deprecated names this system was sent with (empty if none)."""
-        return list(self._deprecations)
 
     def parameter_values(self) -> dict[str, Any]:
         """Every parameter group by name, the potential's and the surface's included (the core's input)."""
@@ -426,6 +417,8 @@ class GeneralizedChaplyginSpec(SystemSpec):
 
     model_config = ConfigDict(extra="forbid", json_schema_extra={"examples": [GENERALIZED_CHAPLYGIN_EXAMPLE]})
     renamed_state: ClassVar[dict[str, str]] = RENAMED_STATE
+    former_fields: ClassVar[dict[str, str]] = RENAMED_FIELDS
+    former_fields_at: ClassVar[str] = "system."
 
     kind: Literal["generalized_chaplygin"]
     coordinates: list[Annotated[str, Field(min_length=1, max_length=32)]] = Field(
@@ -444,14 +437,6 @@ class GeneralizedChaplyginSpec(SystemSpec):
     b: str = Field(min_length=1, max_length=MAX_EXPRESSION_LENGTH)
     potential: str | None = Field(None, max_length=MAX_EXPRESSION_LENGTH,
                                   description="U(q), subtracted from L (null: none, or already in L)")
-
-    @model_validator(mode="wrap")
-    @classmethod
-    def _old_names(cls, data: Any, handler: ModelWrapValidatorHandler[GeneralizedChaplyginSpec]) -> Any:
-        data, notes = renamed(data, RENAMED_FIELDS, "system.")
-        spec = handler(data)
-        spec._deprecations = notes
-        return spec
 
     @field_validator("coordinates", "velocities", "parameters")
     @classmethod

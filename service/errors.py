@@ -70,12 +70,6 @@ def invalid_request(errors: Sequence[FieldError]) -> ProblemError:
     return ProblemError(422, "Invalid request", detail, INVALID_REQUEST, errors)
 
 
-def refused_fields(refusal: RefusedField, block: str = "") -> list[FieldError]:
-    """The fields of a refusal (:mod:`nonholonomic.refusals`), named from ``block`` of the request."""
-    named = refusal.within(block) if block else refusal
-    return [FieldError(field=field, reason=reason) for field, reason in named.problems()]
-
-
 def field_path(loc: Sequence[Any], body: Any) -> str:
     """Dotted path of a pydantic error location in the request body.
 
@@ -141,7 +135,8 @@ def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(RefusedField)
     async def _refused(request: Request, exc: RefusedField) -> JSONResponse:
         """Every refusal of the core, of any layer, as one 422 naming each field."""
-        return _respond(invalid_request(refused_fields(exc)).problem, request)
+        fields = [FieldError(field=field, reason=reason) for field, reason in exc.problems()]
+        return _respond(invalid_request(fields).problem, request)
 
     @app.exception_handler(RequestValidationError)
     async def _validation(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -128,7 +128,7 @@ def _check_size(request: BracketVerifyRequest | HamiltonizeRequest, settings: Se
 
 def _deprecations(request: BracketVerifyRequest | HamiltonizeRequest) -> list[str]:
     """Notes on the deprecated fields the request sent (``budget_s``; ``lagrangian``, now ``L``)."""
-    renamed = request.renamed_fields() if isinstance(request, HamiltonizeRequest) else []
+    renamed = request.deprecations() if isinstance(request, HamiltonizeRequest) else []
     return [*([BUDGET_S_DEPRECATED] if "budget_s" in request.model_fields_set else []), *renamed]
 
 
