@@ -15,6 +15,7 @@ import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector
+from nonholonomic.systems import registered
 
 
 @dataclass(frozen=True)
@@ -148,15 +149,12 @@ def initial_state_problems(system: MechanicalSystem, parameters: Mapping[str, ob
                                                        f"the initial state: {why}")]
 
 
-#: Kinds whose state moves on a surface Φ(x) = 0 of the user's, with normal ∇Φ/|∇Φ| and density |∇Φ|.
-_SURFACE_KINDS = frozenset({"ball_on_surface"})
-
-
 def surface_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
     """A user's surface whose gradient vanishes (or is not finite) at the initial x: the normal
     ∇Φ/|∇Φ| of the equations is undefined there and every step would be nan; refused naming
     ``initial_state.x`` (the density |∇Φ| of the measure is the kernel that says so)."""
-    if system.kind not in _SURFACE_KINDS:
+    record = registered(system.kind)
+    if record is None or not record.surface:  # the state moves on a user's surface Φ(x) = 0: density |∇Φ|
         return []
     with np.errstate(all="ignore"):
         norm = float(numeric(system).density(np.asarray(y, dtype=float)[None, :], p)[0, 0])  # |grad Phi|
@@ -167,18 +165,14 @@ def surface_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> 
     return [FieldProblem("initial_state.x", f"{why}; choose an x on a regular part of the surface, or another Phi")]
 
 
-#: Kinds written by the user as a Lagrangian: a field not finite at the initial state names ``initial_state.q``.
-_USER_LAGRANGIAN_KINDS = {"generalized_chaplygin": "the kinetic matrix d2L/dq_dot2 is singular there, or L, S or U is",
-                          "lagrangian": "the mass matrix d2L/dq_dot2 (or A M^-1 A^T) is singular there, or L or a "
-                                        "constraint is"}
-
-
 def potential_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -> list[FieldProblem]:
     """A user's potential (``potential == "expression"``) whose gradient, so the field, is not finite at
     the initial state: refused before anything runs, naming ``system.potential.U``; for a user's
     generalized Chaplygin or Lagrangian system, any field not finite there (det M = 0 ...), naming
     ``initial_state.q``."""
-    user = system.kind in _USER_LAGRANGIAN_KINDS
+    record = registered(system.kind)
+    singular = None if record is None else record.singular_field
+    user = singular is not None
     if user:
         field = "initial_state.q"
     elif system.potential != "expression":
@@ -193,7 +187,7 @@ def potential_problems(system: MechanicalSystem, p: np.ndarray, y: np.ndarray) -
         return [FieldProblem(field, f"{what}: cannot be evaluated at the initial state ({type(exc).__name__}: {exc})")]
     if np.all(np.isfinite(f)):
         return []
-    why = (f"the field is not finite at the initial state: {_USER_LAGRANGIAN_KINDS[system.kind]}" if user else
+    why = (f"the field is not finite at the initial state: {singular}" if user else
            "its gradient is not finite at the initial state (a singularity there); choose another U or state")
     return [FieldProblem(field, f"{what}: {why}")]
 

@@ -286,17 +286,25 @@ def rubber_ball_to_veselova(potential: str = "zero") -> IsomorphismMap:
     )
 
 
-#: Every map by name, with the source potentials it holds for (None: all of the source's).
-MAPS: dict[str, tuple[Callable[..., IsomorphismMap], tuple[str, ...] | None]] = {
-    "veselova_to_e3": (veselova_to_e3, None),
-    "veselova_to_neumann": (lambda potential="zero": veselova_to_neumann(), ("zero",)),
-    "e3_to_clebsch": (lambda potential="zero": e3_to_clebsch(), ("zero",)),
-    "chaplygin_ball_to_clebsch": (lambda potential="zero": chaplygin_ball_to_clebsch(), ("zero",)),
-    "rubber_ball_to_veselova": (rubber_ball_to_veselova, None),
+@dataclass(frozen=True)
+class MapEntry:
+    """One of the paper's maps: its source kind, how it is built for a source potential, and the source
+    potentials it holds for (None: all of the source's)."""
+
+    source: str
+    build: Callable[..., IsomorphismMap]
+    potentials: tuple[str, ...] | None = None
+
+
+#: Every map by name.
+MAPS: dict[str, MapEntry] = {
+    "veselova_to_e3": MapEntry("veselova", veselova_to_e3),
+    "veselova_to_neumann": MapEntry("veselova", lambda potential="zero": veselova_to_neumann(), ("zero",)),
+    "e3_to_clebsch": MapEntry("veselova_e3", lambda potential="zero": e3_to_clebsch(), ("zero",)),
+    "chaplygin_ball_to_clebsch": MapEntry("chaplygin_ball", lambda potential="zero": chaplygin_ball_to_clebsch(),
+                                          ("zero",)),
+    "rubber_ball_to_veselova": MapEntry("rubber_ball", rubber_ball_to_veselova),
 }
-#: The source kind of each map.
-SOURCE_KINDS = {"veselova_to_e3": "veselova", "veselova_to_neumann": "veselova", "e3_to_clebsch": "veselova_e3",
-                "chaplygin_ball_to_clebsch": "chaplygin_ball", "rubber_ball_to_veselova": "rubber_ball"}
 
 
 def get_map(name: str, potential: str = "zero") -> IsomorphismMap:
@@ -309,10 +317,10 @@ def get_map(name: str, potential: str = "zero") -> IsomorphismMap:
     """
     if name not in MAPS:
         raise KeyError(f"unknown map {name!r}; known: {', '.join(MAPS)}")
-    build, potentials = MAPS[name]
-    if potentials is not None and potential not in potentials:
-        raise KeyError(f"{name} holds for the potential {' or '.join(potentials)} only, not {potential!r}")
-    return build(potential)
+    entry = MAPS[name]
+    if entry.potentials is not None and potential not in entry.potentials:
+        raise KeyError(f"{name} holds for the potential {' or '.join(entry.potentials)} only, not {potential!r}")
+    return entry.build(potential)
 
 
 def maps_for(kind: str, potential: str) -> list[str]:
@@ -320,8 +328,8 @@ def maps_for(kind: str, potential: str) -> list[str]:
     derived for named potentials, not for a user's expression)."""
     from nonholonomic.systems import SUPPORTED_POTENTIALS
 
-    return [name for name, src in SOURCE_KINDS.items()
-            if src == kind and potential in (MAPS[name][1] or SUPPORTED_POTENTIALS[kind])]
+    return [name for name, entry in MAPS.items()
+            if entry.source == kind and potential in (entry.potentials or SUPPORTED_POTENTIALS[kind])]
 
 
 # --------------------------------------------------------------------------------------------------

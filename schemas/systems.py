@@ -18,6 +18,7 @@ from pydantic import (
     ConfigDict,
     Field,
     Strict,
+    TypeAdapter,
     ValidationInfo,
     create_model,
     field_validator,
@@ -32,8 +33,8 @@ from nonholonomic.lagrangian.parse import MAX_COORDINATES
 from nonholonomic.potentials import EXPRESSION, MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, Potential
 from nonholonomic.refusals import RefusedField
 from nonholonomic.systems import (
+    KINDS,
     POTENTIAL_NAMES,
-    SURFACE_KINDS,
     SYSTEMS,
     generalized_chaplygin as gc,
     get_system,
@@ -294,6 +295,11 @@ class SystemSpec(FormerFieldNames):
         at the parameters' ``parameters``."""
         return initial_state_problems(system, parameters, initial_state, project)
 
+    def component_names(self) -> dict[str, list[str]]:
+        """The names of the state's components where the request gives them (a system written by the user:
+        ``{"q": [...], "q_dot": [...]}``); empty for a catalog kind (its definition names them)."""
+        return {}
+
     def expressions(self) -> list[tuple[str, str]]:
         """The expressions the user wrote in this block, by field path (``system.potential.U`` ...)."""
         found = []
@@ -364,14 +370,15 @@ def _system_model(kind: str) -> type[SystemSpec]:
         return default(kind=default_kind)  # type: ignore[call-arg]  # kind: create_model's field
 
     extra: dict[str, Any] = {}
-    if kind in SURFACE_KINDS:
+    surface_kind = KINDS[kind].surface
+    if surface_kind:
         extra["surface"] = (SurfaceSpec, Field(description="the surface Phi(x) = 0 on which the centre moves"))
     return create_model(  # type: ignore[call-overload]  # the fields are the catalog's, as **kwargs
         f"{_camel(kind)}Spec",
         __base__=SystemSpec,
         __doc__=module.TITLE,
         __validators__=({"names_apart": field_validator("potential")(classmethod(_names_apart))}
-                        if kind in SURFACE_KINDS else None),
+                        if surface_kind else None),
         kind=(Literal[kind], ...),
         **{par.name: _parameter_field(par) for par in module.PARAMETERS},
         **extra,
@@ -388,6 +395,22 @@ else:
     AnySystemSpec = Annotated[Union[tuple(SYSTEM_MODELS.values())], Field(discriminator="kind")]  # noqa: UP007
 
 
+def system_spec(system_json: Mapping[str, Any]) -> SystemSpec:
+    """The request model of a stored (already validated) request's ``system`` block, of any kind.
+
+    Raises
+    ------
+    pydantic.ValidationError
+        For a block no kind's model accepts (a job sent straight to the broker may carry anything).
+    """
+    return _system_spec(json.dumps(system_json, sort_keys=True))
+
+
+@lru_cache(maxsize=64)
+def _system_spec(system_text: str) -> SystemSpec:
+    return _JOB_SYSTEM.validate_json(system_text)
+
+
 def definition_of(system_json: Mapping[str, Any]) -> MechanicalSystem:
     """The core's definition of a stored (already validated) request's ``system`` block: its names,
     state, units and field (a user-written system's without Theorem 1's reduction, which only its job
@@ -397,12 +420,9 @@ def definition_of(system_json: Mapping[str, Any]) -> MechanicalSystem:
 
 @lru_cache(maxsize=64)
 def _definition_of(system_text: str) -> MechanicalSystem:
-    system_json = json.loads(system_text)
-    if system_json["kind"] in SYSTEM_MODELS:
-        return SYSTEM_MODELS[system_json["kind"]].model_validate(system_json).definition()
-    from pydantic import TypeAdapter
-
-    return TypeAdapter(JobSystemSpec).validate_python(system_json).validation_definition()
+    spec = _system_spec(system_text)
+    kind: str = spec.kind  # type: ignore[attr-defined]  # create_model's field
+    return spec.validation_definition() if KINDS[kind].written_by_user else spec.definition()
 
 
 # --------------------------------------------------------------------------------------------------
@@ -471,6 +491,9 @@ class GeneralizedChaplyginSpec(SystemSpec):
     def validation_definition(self) -> MechanicalSystem:
         """The system without Theorem 1 (enough to check a request: names, state, the field at it)."""
         return gc.define(self.data(), reduce=False)
+
+    def component_names(self) -> dict[str, list[str]]:
+        return {"q": list(self.coordinates), "q_dot": list(self.velocities)}
 
     def expressions(self) -> list[tuple[str, str]]:
         return [(f"system.{field}", getattr(self, field)) for field in gc.EXPRESSION_FIELDS
@@ -576,6 +599,9 @@ class LagrangianSpec(SystemSpec):
         """The definition an ensemble sweeping a parameter shares: only what holds for every value claimed."""
         return lag.define(self.data(), generic=True)
 
+    def component_names(self) -> dict[str, list[str]]:
+        return {"q": list(self.coordinates), "q_dot": [lagrangian.velocity_name(c) for c in self.coordinates]}
+
     def expressions(self) -> list[tuple[str, str]]:
         return [("system.L", self.L), *((f"system.constraints[{i}]", c) for i, c in enumerate(self.constraints))]
 
@@ -589,10 +615,17 @@ class LagrangianSpec(SystemSpec):
             return None, [FieldProblem(f, r) for f, r in exc.within("system").problems()]
 
 
-#: What POST /v1/jobs takes as ``system``: every kind of the catalog, a generalized Chaplygin system and a
-#: Lagrangian system of one's own.
-if TYPE_CHECKING:  # the union's members are built from the catalog at import: to a type checker, a SystemSpec
+#: The request models of the kinds written by the user (each its own shape), by kind; every such kind of the registry
+#: has one (checked below).
+USER_WRITTEN_MODELS: dict[str, type[SystemSpec]] = {gc.KIND: GeneralizedChaplyginSpec, lag.KIND: LagrangianSpec}
+_unmodelled = sorted(k for k, record in KINDS.items() if record.written_by_user and k not in USER_WRITTEN_MODELS)
+if _unmodelled:
+    raise TypeError(f"kinds written by the user without a request model in schemas.systems: {_unmodelled}")
+
+#: What POST /v1/jobs takes as ``system``: every catalog kind, and every kind written by the user.
+if TYPE_CHECKING:  # the union's members are built from the registry at import: to a type checker, a SystemSpec
     JobSystemSpec: TypeAlias = SystemSpec
 else:
-    JobSystemSpec = Annotated[Union[(*SYSTEM_MODELS.values(), GeneralizedChaplyginSpec,  # noqa: UP007
-                                     LagrangianSpec)], Field(discriminator="kind")]
+    JobSystemSpec = Annotated[Union[(*SYSTEM_MODELS.values(), *USER_WRITTEN_MODELS.values())],  # noqa: UP007
+                              Field(discriminator="kind")]
+_JOB_SYSTEM: TypeAdapter[SystemSpec] = TypeAdapter(JobSystemSpec)

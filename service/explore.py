@@ -25,17 +25,15 @@ import numpy as np
 from nonholonomic.analysis.chaos_map.grid import Grid, GridError, plan
 from nonholonomic.analysis.periodic_orbit import crossing_states
 from nonholonomic.analysis.poincare import section
-from nonholonomic.analysis.sampling import RECIPES, fixable
+from nonholonomic.analysis.sampling import fixable
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.numerics.integration import IntegrationError
 from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector
-from nonholonomic.systems import SUPPORTED_POTENTIALS, SYSTEMS, get_system
+from nonholonomic.systems import KINDS, SUPPORTED_POTENTIALS, SYSTEMS, get_system
 from schemas.explore import ExploreSection
 
 #: Runs integrated at once; crossings in the first piece and in each next one; runs kept.
 WORKERS, FIRST_PIECE, PIECE, KEEP = 2, 100, 500, 64
-#: The plane a kind's page starts with where the docs use one (the chaos map's of the ball).
-PREFERRED = {"chaplygin_ball": ("gamma3", ("gamma1", "M3"), {"energy": 2.0, "area": 0.0})}
 #: A restart's crossing at its own start (on the surface) is below this time and is not counted.
 RESTART_T = 1e-9
 
@@ -131,8 +129,7 @@ def orbit_points(system: MechanicalSystem, p: np.ndarray, x0: np.ndarray, period
 
 def explorable() -> dict[str, list[str]]:
     """The kinds (and their potentials) the explorer can draw: those with states on a level set."""
-    return {kind: list(SUPPORTED_POTENTIALS[kind]) for kind in SYSTEMS if kind in RECIPES
-            and kind in SUPPORTED_POTENTIALS}
+    return {kind: list(SUPPORTED_POTENTIALS[kind]) for kind in SYSTEMS if KINDS[kind].sampling is not None}
 
 
 @lru_cache(maxsize=64)
@@ -160,13 +157,16 @@ def defaults(kind: str, potential: str) -> dict[str, Any]:
     names = [i.name for i in system.integrals]
     level_values = numeric(system).integrals(x[None, :], p)[0]
     level = {name: round(float(level_values[names.index(name)]), 6) for name in fixable(system)}
-    velocity = RECIPES[kind].velocity
+    record = KINDS[kind]
+    assert record.sampling is not None  # explorable
+    velocity = record.sampling.velocity
     vectors = {v.name: [str(s) for s in v.symbols] for v in system.state}
     positions = [c for name, comps in vectors.items() if name != velocity for c in comps]
-    if kind in PREFERRED:  # the docs' plane (the chaos map's)
-        surface, coordinates, preferred = PREFERRED[kind]
-        return {"system": example, "section": {"surface": surface, "value": 0.0, "direction": "increasing",
-                                               "coordinates": list(coordinates), "level": dict(preferred)}}
+    if record.explorer_plane is not None:  # the kind's own first plane (the ball's: the docs' chaos map's)
+        preferred = record.explorer_plane
+        return {"system": example, "section": {"surface": preferred.surface, "value": 0.0, "direction": "increasing",
+                                               "coordinates": list(preferred.coordinates),
+                                               "level": dict(preferred.level)}}
     for surface in reversed(positions):
         for first in positions:
             for second in vectors[velocity]:

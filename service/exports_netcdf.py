@@ -37,17 +37,13 @@ def _describe(system_json: Mapping[str, Any]) -> dict[str, Any]:
     ``tau``'s (the reduced time's formula and equation); empty where the definition cannot be read. A
     system written by the user (generalized Chaplygin, Lagrangian) names its components itself:
     ``{"q": [names], "q_dot": [names]}`` under ``components``."""
-    if system_json.get("kind") == "generalized_chaplygin":
-        return {"q": "generalized coordinate", "q_dot": "generalized velocity",
-                "components": {"q": list(system_json.get("coordinates") or []),
-                               "q_dot": list(system_json.get("velocities") or [])}}
-    if system_json.get("kind") == "lagrangian":
-        coordinates = [str(c) for c in system_json.get("coordinates") or []]
-        return {"q": "generalized coordinate", "q_dot": "generalized velocity",
-                "components": {"q": coordinates, "q_dot": [f"{c}_dot" for c in coordinates]}}
     try:
-        from schemas.systems import definition_of
+        from schemas.systems import definition_of, system_spec
 
+        spec = system_spec(dict(system_json))
+        own = spec.component_names()
+        if own:  # a system written by the user: its state (q, q_dot) named by the request, no definition needed
+            return {"q": "generalized coordinate", "q_dot": "generalized velocity", "components": own}
         system = definition_of(dict(system_json))
     except Exception:  # noqa: BLE001 (a label is not worth failing a download)
         return {}

@@ -9,9 +9,12 @@ from functools import lru_cache
 from typing import Any
 
 from jinja2 import Environment, PackageLoader, select_autoescape
+from pydantic import ValidationError
 
 import nonholonomic
 from nonholonomic.analysis.lyapunov.result import CONVERGENCE_WARNING
+from nonholonomic.systems import registered
+from schemas.systems import system_spec
 
 #: Seconds between reloads of a page whose job or ensemble is queued or running.
 REFRESH_S = 2
@@ -113,7 +116,8 @@ def job_plots(result: dict[str, Any] | None, status: str = "succeeded") -> list[
     answer 409 until then)."""
     if status != "succeeded" or not result or "trajectory" not in result:
         return []
-    own = (result.get("system") or {}).get("kind") in ("lagrangian", "generalized_chaplygin")
+    record = registered(str((result.get("system") or {}).get("kind")))
+    own = record is not None and record.written_by_user
     return [(name, TRAJECTORY_CAPTION_OWN if own and name == "trajectory" else caption)
             for name, caption in JOB_PLOT_CAPTIONS.items() if name in ("trajectory", "integrals") or result.get(name)]
 
@@ -141,8 +145,26 @@ def render_job(job: dict[str, Any]) -> str:
     """
     result = job.get("result")
     return environment().get_template("job.html").render(
-        job=job, result=result, system=(result or {}).get("system"), plots=job_plots(result, job["status"]),
-        refresh=_refresh(job["status"]))
+        job=job, result=result, system=(result or {}).get("system"), written=written_system(job.get("request")),
+        plots=job_plots(result, job["status"]), refresh=_refresh(job["status"]))
+
+
+def written_system(request: Any) -> dict[str, Any] | None:
+    """What the user wrote of a system of their own (a kind written by the user): the names of the state's
+    components and each expression by field (``L``, ``a1``, ``constraints[0]`` ...); None for a catalog kind,
+    or a request no kind's model reads (one sent straight to the broker)."""
+    block = request.get("system") if isinstance(request, dict) else None
+    if not isinstance(block, dict):
+        return None
+    record = registered(str(block.get("kind")))
+    if record is None or not record.written_by_user:
+        return None
+    try:
+        spec = system_spec(block)
+    except ValidationError:
+        return None
+    return {"components": spec.component_names(),
+            "expressions": [(field.removeprefix("system."), text) for field, text in spec.expressions()]}
 
 
 def render_ensemble(view: dict[str, Any], members: Sequence[dict[str, Any]], units: dict[str, str]) -> str:

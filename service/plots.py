@@ -45,7 +45,7 @@ from matplotlib.ticker import MaxNLocator
 
 from nonholonomic.definition import MechanicalSystem, StateConstraint, StateVector
 from nonholonomic.potentials import EXPRESSION
-from nonholonomic.systems import SURFACE_KINDS, get_system
+from nonholonomic.systems import get_system, registered
 
 if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType
@@ -238,13 +238,14 @@ def _definition(system_info: Mapping[str, Any], request: Mapping[str, Any] | Non
     constraints, which a user's potential does not change; a user's surface, from the ``request``, does)."""
     potential = system_info.get("potential", "zero")
     surface = None
-    if system_info["kind"] in ("generalized_chaplygin", "lagrangian"):  # the user's system lives in the request
+    record = registered(system_info["kind"])
+    if record is not None and record.written_by_user:  # the user's system lives in the request
         from schemas.systems import definition_of
 
         if request is None or "system" not in request:
             raise PlotUnavailable("the system of this result is in its request, which is not given")
         return definition_of(request["system"])
-    if system_info["kind"] in SURFACE_KINDS:
+    if record is not None and record.surface:
         from schemas.systems import SurfaceSpec
 
         if request is None or "surface" not in request.get("system", {}):

@@ -154,10 +154,10 @@ def warm_up(state: WarmUp | None = None) -> WarmUp:
     from nonholonomic.evidence.measure import start_divergence_proof
     from nonholonomic.numerics.integration import MACHINE_EPSILON, heyoka_template
     from nonholonomic.numerics.kernels import numeric
-    from nonholonomic.systems import SUPPORTED_POTENTIALS, SURFACE_KINDS, get_system
+    from nonholonomic.systems import KINDS, SUPPORTED_POTENTIALS, get_system
 
     # a user's surface is compiled with its first job: the example's would be wasted
-    todo = [(kind, potential) for kind, potentials in SUPPORTED_POTENTIALS.items() if kind not in SURFACE_KINDS
+    todo = [(kind, potential) for kind, potentials in SUPPORTED_POTENTIALS.items() if not KINDS[kind].surface
             for potential in potentials]
     state.total = len(todo)
     for kind, potential in todo:

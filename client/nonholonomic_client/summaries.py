@@ -34,9 +34,9 @@ def systems_table(catalog: Mapping[str, Any]) -> str:
     """
     rows = [("KIND", "STATE", "TITLE")]
     entries = list(catalog.get("systems", []))
-    for own in ("generalized_chaplygin", "lagrangian"):  # systems written by the user, each its own shape
-        if isinstance(catalog.get(own), Mapping):
-            entries.append(catalog[own])
+    # beside "systems", one entry per kind written by the user (each its own shape), under the kind's name
+    entries += [entry for key, entry in catalog.items()
+                if key != "systems" and isinstance(entry, Mapping) and entry.get("kind") == key]
     for s in entries:
         state = [str(v.get("name")) if isinstance(v, Mapping) else str(v) for v in s.get("state", [])]
         rows.append((str(s.get("kind")), ", ".join(state), str(s.get("title", ""))))

@@ -5,8 +5,8 @@ constraint of the system (|γ| = 1, (ω, γ) = 0, Φ(x) = 0 ...) and give the in
 ``level`` the requested values, e.g. the energy and the constant of areas of Chaplygin's ball
 (eq. 2604-2) or the energy and K of the nonholonomic Jacobi problem (eqs. 2804-2, 2804-4).
 
-Method (one recipe per kind, :data:`RECIPES`)
-----------------------------------------------
+Method (one plan per kind: its record's ``sampling``, :class:`nonholonomic.kinds.Sampling`)
+-------------------------------------------------------------------------------------------
 1. Positions. Unit vectors (γ, s, Γ, E) are uniform on the sphere (normalised standard normal
    vectors); E at a fixed angle to γ is ``(γ, E) γ + √(1 − (γ, E)²) v`` with v uniform among the
    unit vectors ⊥ γ. The centre x of the ball on the quadric (x, B⁻¹x) = 1 is uniform with respect to
@@ -57,8 +57,10 @@ import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import vector_slice
+from nonholonomic.kinds import Sampling
 from nonholonomic.numerics.kernels import numeric
 from nonholonomic.refusals import RefusedField
+from nonholonomic.systems import registered
 
 #: Candidates drawn per batch (fixed: the random stream and hence the samples do not depend on count).
 BATCH = 2048
@@ -158,21 +160,6 @@ class _Context:
 Drawer = Callable[[_Context, np.random.Generator, int], _Draw]
 
 
-@dataclass(frozen=True)
-class Recipe:
-    """How one kind draws its states.
-
-    ``velocity`` is the state vector solved for; ``fixable`` the integrals a level may fix (energy
-    first), kept where the system (its potential) has them; ``draw`` draws a batch of candidates;
-    ``description(fixable)`` is the catalog's one line.
-    """
-
-    velocity: str
-    fixable: tuple[str, ...]
-    draw: Drawer
-    description: Callable[[tuple[str, ...]], str]
-
-
 def _sphere_then_velocity(position: str, velocity: str, plane: bool, linear: str | None) -> Drawer:
     """Drawer: ``position`` uniform on the sphere; the velocity direction uniform on the sphere
     (``plane`` False) or on the circle ⊥ the position (``plane`` True); if the level fixes the linear
@@ -238,53 +225,21 @@ def _draw_ball_on_quadric(ctx: _Context, rng: np.random.Generator, n: int) -> _D
     return _Draw(ctx.new_states(n, x=x, omega=base), base, direction, keep, floors)
 
 
-def _root(where: str) -> str:
-    return (f"t solves H = h ({where}), either root with probability 1/2; positions and directions that miss "
-            "the level are redrawn")
+def _drawer(plan: Sampling) -> Drawer:
+    """The drawer of a kind's :class:`~nonholonomic.kinds.Sampling` plan."""
+    if plan.method == "chaplygin_ball_veselova":
+        return _draw_chaplygin_ball_veselova
+    if plan.method == "ball_on_quadric":
+        return _draw_ball_on_quadric
+    if plan.position is None:
+        raise ValueError("a sphere_then_velocity plan names its position vector")
+    return _sphere_then_velocity(plan.position, plan.velocity, plan.plane, plan.linear)
 
 
-def _quadric_words(names: tuple[str, ...]) -> str:
-    if "K" not in names:
-        return f"x uniform by area on the quadric; omega = t u with u uniform on the sphere; {_root('eq. 2804-2')}"
-    return ("x uniform by area on the quadric; with K fixed, omega = w + a n, w ⊥ n of uniform direction and size set "
-            "by K (eq. 2804-4), a = ±sqrt(2 (h - U(x) - (D0 + D) w^2/2)/D0), either sign with probability 1/2 (eq. "
-            "2804-2); else omega = t u with u uniform on the sphere; positions and directions that miss the level are "
-            "redrawn")
-
-
-#: One recipe per kind.
-RECIPES: dict[str, Recipe] = {
-    "chaplygin_ball": Recipe(
-        "M", ("energy", "area"), _sphere_then_velocity("gamma", "M", plane=False, linear="area"),
-        lambda names: "gamma uniform on the sphere; M = c gamma + t u with u uniform among unit vectors ⊥ gamma if the "
-                      f"area c = (M, gamma) is fixed, else M = t u, u uniform on the sphere; {_root('eq. 2604-2')}"),
-    "veselova": Recipe(
-        "omega", ("energy",), _sphere_then_velocity("gamma", "omega", plane=True, linear=None),
-        lambda names: "gamma uniform on the sphere; omega = t u with u uniform among unit vectors ⊥ gamma; "
-                      + _root("eq. 2504-3")),
-    "rubber_ball": Recipe(
-        "omega", ("energy",), _sphere_then_velocity("gamma", "omega", plane=True, linear=None),
-        lambda names: "gamma uniform on the sphere; omega = t u with u uniform among unit vectors ⊥ gamma; "
-                      + _root("text after eq. 2704-5")),
-    "chaplygin_ball_veselova": Recipe(
-        "omega", ("energy", "gamma_E"), _draw_chaplygin_ball_veselova,
-        lambda names: "gamma uniform on the sphere; E uniform on the sphere, or E = (gamma, E) gamma + "
-                      "sqrt(1 - (gamma, E)^2) v with v uniform among unit vectors ⊥ gamma if (gamma, E) is fixed; "
-                      f"omega = t u with u uniform among unit vectors ⊥ E; {_root('text after eq. 2704-5')}"),
-    "ball_on_quadric": Recipe("omega", ("energy", "K"), _draw_ball_on_quadric, _quadric_words),
-    "neumann": Recipe(
-        "L", ("energy", "area"), _sphere_then_velocity("s", "L", plane=False, linear="area"),
-        lambda names: "s uniform on the sphere; L = c s + t u with u uniform among unit vectors ⊥ s if the area "
-                      f"c = (s, L) is fixed, else L = t u with u uniform on the sphere; {_root('eq. 2504-13')}"),
-    "clebsch": Recipe(
-        "L", ("energy", "area"), _sphere_then_velocity("s", "L", plane=False, linear="area"),
-        lambda names: "s uniform on the sphere; L = c s + t u with u uniform among unit vectors ⊥ s if the area "
-                      f"c = (s, L) is fixed, else L = t u with u uniform on the sphere; {_root('eq. 2504-13')}"),
-    "veselova_e3": Recipe(
-        "M", ("energy",), _sphere_then_velocity("Gamma", "M", plane=True, linear=None),
-        lambda names: "Gamma uniform on the sphere; M = t u with u uniform among unit vectors ⊥ Gamma; "
-                      + _root("eq. 2504-12")),
-}
+def plan_of(system: MechanicalSystem) -> Sampling | None:
+    """The sampling plan of ``system``'s kind (its record's ``sampling``), or None (no states on a level set)."""
+    record = registered(system.kind)
+    return None if record is None else record.sampling
 
 
 # --- public API -----------------------------------------------------------------------------------
@@ -298,25 +253,44 @@ def fixable(system: MechanicalSystem) -> tuple[str, ...]:
     Chaplygin's ball with the Veselova constraint: energy and (γ, E); Neumann and Clebsch: energy and
     the area (s, L); Veselova, the rubber ball and eq. (2504-12) on e(3): the energy.
 
-    A kind without a recipe (a system written by the user) has none: ``()``.
+    A kind without a plan (a surface or a system written by the user) has none: ``()``.
     """
-    if system.kind not in RECIPES:
+    plan = plan_of(system)
+    if plan is None:
         return ()
     claimed = {claim.name for claim in system.integrals}
-    return tuple(name for name in RECIPES[system.kind].fixable if name in claimed)
+    return tuple(name for name in plan.fixable if name in claimed)
 
 
 def describe_sampling(system: MechanicalSystem) -> str:
     """One line on how :func:`on_level` draws the states of ``system`` (for the catalog)."""
-    if system.kind not in RECIPES:
-        return _NO_RECIPE
-    return RECIPES[system.kind].description(fixable(system))
+    plan = plan_of(system)
+    if plan is None:
+        return no_plan(system)
+    return plan.words(fixable(system))
 
 
-#: Why a kind without a recipe samples no level: the system (a surface, a Lagrangian, a generalized
-#: Chaplygin system) is the user's own, so the extent of its level sets is unknown.
-_NO_RECIPE = ("no states drawn on a level set (the system is the user's own: the extent of its level sets is "
-              "unknown): give the members' initial states or a sweep")
+def no_plan(system: MechanicalSystem) -> str:
+    """Why ``system`` samples no level: its kind has no plan (the extent of a user's surface or system's level
+    sets is unknown)."""
+    record = registered(system.kind)
+    unknown = "the extent of its level sets is unknown"
+    why = (f"the system is the user's own: {unknown}" if record is None or record.written_by_user else
+           f"the surface is the user's own: {unknown}" if record.surface else
+           f"the kind {system.kind} declares no sampling plan")
+    return f"no states drawn on a level set ({why}): give the members' initial states or a sweep"
+
+
+def _needed_plan(system: MechanicalSystem) -> Sampling:
+    plan = plan_of(system)
+    if plan is None:
+        raise LevelError("level", f"{system.kind}: {no_plan(system)}")
+    return plan
+
+
+def _velocity(system: MechanicalSystem) -> str:
+    """The state vector solved for on the energy level."""
+    return _needed_plan(system).velocity
 
 
 def _check_request(system: MechanicalSystem, parameters: np.ndarray, level: Mapping[str, float],
@@ -325,8 +299,8 @@ def _check_request(system: MechanicalSystem, parameters: np.ndarray, level: Mapp
         raise LevelError("count", f"must be a positive integer, got {count!r}")
     if isinstance(seed, bool) or not isinstance(seed, Integral) or seed < 0:
         raise LevelError("seed", f"must be a non-negative integer, got {seed!r}")
-    if system.kind not in RECIPES:
-        raise LevelError("level", f"{system.kind}: {_NO_RECIPE}")
+    if plan_of(system) is None:
+        raise LevelError("level", f"{system.kind}: {no_plan(system)}")
     if np.shape(parameters) != (len(system.parameter_symbols),):
         raise ValueError(f"parameters: expected {len(system.parameter_symbols)} values in the order "
                          f"{[str(s) for s in system.parameter_symbols]}, got shape {np.shape(parameters)}")
@@ -367,7 +341,7 @@ def _solve_energy(ctx: _Context, draw: _Draw, h: float,
     extremum : ``e₀ − e₁²/(4 e₂)``, the least (e₂ > 0) or greatest (e₂ < 0) energy on each line.
     curvature : e₂.
     """
-    slot = ctx.slot(RECIPES[ctx.system.kind].velocity)
+    slot = ctx.slot(_velocity(ctx.system))
     states, base, u = draw.states, draw.base, draw.direction
 
     def energy(v: np.ndarray) -> np.ndarray:
@@ -486,7 +460,7 @@ def on_level(system: MechanicalSystem, parameters: np.ndarray, level: Mapping[st
     """
     values = _check_request(system, parameters, level, count, seed)
     ctx = _Context(system, np.asarray(parameters, dtype=float), values)
-    recipe = RECIPES[system.kind]
+    draw_batch = _drawer(_needed_plan(system))
     rng = np.random.default_rng(seed)
     budget = max(TRIES_PER_STATE * count, BATCH)
     accepted: list[np.ndarray] = []
@@ -494,7 +468,7 @@ def on_level(system: MechanicalSystem, parameters: np.ndarray, level: Mapping[st
     floors = {name: np.inf for name in values}
     energy_low, energy_high = np.inf, -np.inf
     while found < count and tries < budget and not (found == 0 and tries >= EARLY_GIVE_UP):
-        draw = recipe.draw(ctx, rng, BATCH)
+        draw = draw_batch(ctx, rng, BATCH)
         pick_first = rng.random(BATCH) < 0.5
         tries += BATCH
         for name, floor in draw.floors.items():

@@ -68,8 +68,6 @@ from nonholonomic.work_limits import WorkLimits, operations, over
 POINTWISE_TOLERANCE = 1e-10
 #: The original-time control "passes" (shows the time substitution is needed) above this residual.
 CONTROL_THRESHOLD = 1e-6
-#: Kinds with a Hamiltonian form here.
-KINDS = ("veselova", "chaplygin_ball")
 
 
 @dataclass(frozen=True)

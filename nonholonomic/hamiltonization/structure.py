@@ -14,24 +14,18 @@ import numpy as np
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.numerics.kernels import VectorKernel, vectorize
+from nonholonomic.systems import registered
 
-#: Kinds with a Hamiltonian form after a time substitution (paper: eq. 2504-10-2, 2604-5..7).
-HAMILTONIAN_KINDS = frozenset({"veselova", "chaplygin_ball"})
-#: Kinds with Euler-angle local forms (paper: eq. 2504-6..9, Theorem 2; eq. 001..007).
-LOCAL_FORM_KINDS = frozenset({"veselova", "chaplygin_ball"})
 #: States at most used for the pointwise structural checks (thinned evenly from the samples).
 MAX_POINTS = 50
 
 
-#: Kinds whose Hamiltonian form comes with the definition, when Theorem 1 gives one (else the check
-#: says why not).
-THEOREM_1_KINDS = frozenset({"generalized_chaplygin", "lagrangian"})
-
-
 def structural_checks(kind: str) -> tuple[str, ...]:
-    """The structural checks available for ``kind``."""
-    return ((("bracket",) if kind in HAMILTONIAN_KINDS | THEOREM_1_KINDS else ())
-            + (("euler_angles",) if kind in LOCAL_FORM_KINDS else ()))
+    """The structural checks available for ``kind``: its record's ``structure_checks`` (a Hamiltonian form after
+    a time substitution, eq. 2504-10-2, 2604-5..7, or Theorem 1's; Euler-angle local forms, eq. 2504-6..9,
+    Theorem 2); none for a kind no module registers."""
+    record = registered(kind)
+    return () if record is None else record.structure_checks
 
 
 def _thin(states: np.ndarray) -> np.ndarray:

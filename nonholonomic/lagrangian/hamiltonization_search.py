@@ -27,7 +27,7 @@ from nonholonomic import bounded
 from nonholonomic.definition import ReducedTime
 from nonholonomic.lagrangian.chaplygin import ChaplyginReduction, chaplygin_reduction
 from nonholonomic.lagrangian.equations import derive, tidy
-from nonholonomic.lagrangian.parse import LagrangianData
+from nonholonomic.lagrangian.parse import KIND, LagrangianData
 
 __all__ = ["Hamiltonization", "hamiltonization"]
 
@@ -141,7 +141,7 @@ def _hamiltonization(data: LagrangianData) -> Hamiltonization:
     proven = form.proof[0] if how == "cancelled to 0" else None  # a randomized test is evidence, not a proof
     proof = (proven, form.proof[1] + "; the reduced system (2704-7) is the Lagrange-d'Alembert field on the "
                                      f"constraint manifold ({how})")
-    form = replace(form, system_kind="lagrangian", proof=proof, from_indices=(*shape, *(n + i for i in shape)))
+    form = replace(form, system_kind=KIND, proof=proof, from_indices=(*shape, *(n + i for i in shape)))
     reduced_time = ReducedTime(N, f"d tau = N dt, N = {sp.sstr(N)} (Theorem 1, on the Chaplygin reduction)", "2704-8",
                                "s (times N's unit)")
     return Hamiltonization(form, reduced_time, {**summary, "verdict": "found", "reducing_multiplier": sp.sstr(N),

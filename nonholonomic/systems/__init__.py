@@ -1,58 +1,70 @@
-"""The systems of the paper, one module each; :data:`SYSTEMS` maps a request's ``kind`` to it.
+"""The registry of system kinds: one module per kind, each ending with its record ``SYSTEM_KIND``
+(:class:`nonholonomic.kinds.SystemKind`); :data:`KINDS` maps a request's ``kind`` to it.
 
-Adding a system is one new module exposing ``KIND``, ``TITLE``, ``PARAMETERS``, ``STATE``,
-``POTENTIALS`` and ``define(potential) -> MechanicalSystem``, plus its entry here and its tests.
-A kind whose geometry the user writes (``ball_on_surface``: the surface Φ) also takes it:
-``define(potential, surface)``; :data:`SURFACE_KINDS` lists them.
+Adding a kind is one new module plus its tests (``docs/layout.md``, "Adding a system kind"): a module of
+this package named in :data:`BUILT_IN`, or a module of another distribution declared under the entry-point
+group ``nonholonomic.kinds`` (:data:`nonholonomic.kinds.ENTRY_POINT_GROUP`), loaded when this package is.
+A catalog kind's module declares ``KIND``, ``TITLE``, ``PARAMETERS``, ``STATE``, ``POTENTIALS``,
+``POTENTIAL_VARIABLES``, ``EXAMPLE`` and ``define(potential) -> MechanicalSystem`` (``define(potential,
+surface)`` for a kind with ``surface=True``); :data:`SYSTEMS` maps those kinds to their modules.
 """
 
 from __future__ import annotations
 
+import importlib
 from functools import cache
+from importlib.metadata import entry_points
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.expressions import ExpressionError
+from nonholonomic.kinds import ENTRY_POINT_GROUP, SystemKind, unknown_kind
 from nonholonomic.potentials import Potential, expression, potential_symbols
-from nonholonomic.systems import (
-    ball_on_quadric,
-    ball_on_surface,
-    chaplygin_ball,
-    chaplygin_ball_veselova,
-    clebsch,
-    neumann,
-    rubber_ball,
-    veselova,
-    veselova_e3,
-)
 
-SYSTEMS: dict[str, ModuleType] = {module.KIND: module for module in (
-    chaplygin_ball, veselova, chaplygin_ball_veselova, rubber_ball, ball_on_quadric, ball_on_surface, neumann, clebsch,
-    veselova_e3)}
-#: Kinds that take a user's surface Φ(x) = 0 besides the potential.
-SURFACE_KINDS = frozenset({ball_on_surface.KIND})
+if TYPE_CHECKING:
+    from nonholonomic.systems.ball_on_surface import Surface
 
-#: Built-in potentials each kind accepts (besides a user's expression, :func:`user_potential`).
-SUPPORTED_POTENTIALS: dict[str, tuple[str, ...]] = {kind: tuple(m.POTENTIALS) for kind, m in SYSTEMS.items()}
+#: The built-in kinds' modules, in the catalog's order.
+BUILT_IN = ("chaplygin_ball", "veselova", "chaplygin_ball_veselova", "rubber_ball", "ball_on_quadric",
+            "ball_on_surface", "neumann", "clebsch", "veselova_e3", "generalized_chaplygin", "lagrangian")
 
 
-def get_system(kind: str, potential: str | Potential = "zero",
-               surface: ball_on_surface.Surface | None = None) -> MechanicalSystem:
-    """The symbolic definition of ``kind`` with ``potential``: the name of a built-in one, or one
-    written by the user (:func:`user_potential`); for a kind of :data:`SURFACE_KINDS`, on ``surface``
+def kind_of(kind: str) -> SystemKind:
+    """The record of ``kind``.
+
+    Raises
+    ------
+    KeyError
+        If no module registers the kind.
+    """
+    if kind not in KINDS:
+        raise unknown_kind(kind, list(KINDS))
+    return KINDS[kind]
+
+
+def registered(kind: str) -> SystemKind | None:
+    """The record of ``kind``, or None for a kind no module registers (a definition built by hand)."""
+    return KINDS.get(kind)
+
+
+def get_system(kind: str, potential: str | Potential = "zero", surface: Surface | None = None) -> MechanicalSystem:
+    """The symbolic definition of the catalog kind ``kind`` with ``potential``: the name of a built-in one,
+    or one written by the user (:func:`user_potential`); for a kind that takes a surface, on ``surface``
     (:func:`nonholonomic.systems.ball_on_surface.surface`; None: the kind's example surface).
 
     Raises
     ------
     KeyError
-        If the kind is unknown or does not support the potential.
+        If the kind is unknown (or written by the user: its definition is built from its request) or does
+        not support the potential.
     """
     if kind not in SYSTEMS:
-        raise KeyError(f"unknown system kind {kind!r}; known: {sorted(SYSTEMS)}")
+        raise unknown_kind(kind, list(SYSTEMS))
     if not isinstance(potential, Potential) and potential not in SYSTEMS[kind].POTENTIALS:
         raise KeyError(f"system {kind!r} does not support potential {potential!r}")
     if surface is not None:
-        if kind not in SURFACE_KINDS:
+        if not KINDS[kind].surface:
             raise KeyError(f"system {kind!r} takes no surface")
         return SYSTEMS[kind].define(potential, surface)
     return SYSTEMS[kind].define(potential)
@@ -78,7 +90,7 @@ def user_potential(kind: str, text: str, parameters: tuple[str, ...]) -> Potenti
 def own_names(kind: str) -> frozenset[str]:
     """Names a user's potential (or surface) parameter may not take: the system's parameters and their
     symbols, its state and derived vectors and their components, the times."""
-    system = SYSTEMS[kind].define("zero")
+    system = get_system(kind, "zero")
     own = SYSTEMS[kind].PARAMETERS
     names = {p.name for p in own} | {str(s) for p in own for s in p.symbols}
     names |= {v.name for v in system.state} | {str(s) for v in system.state for s in v.symbols}
@@ -86,5 +98,27 @@ def own_names(kind: str) -> frozenset[str]:
     return frozenset(names | {"t", "tau"})
 
 
-#: The names a potential of each kind may use.
+def _collect() -> dict[str, SystemKind]:
+    """The records of the built-in modules, then of the modules declared under the entry-point group."""
+    modules = [importlib.import_module(f"{__name__}.{name}") for name in BUILT_IN]
+    modules += [entry.load() for entry in entry_points(group=ENTRY_POINT_GROUP)]
+    kinds: dict[str, SystemKind] = {}
+    for module in modules:
+        record = getattr(module, "SYSTEM_KIND", None)
+        if not isinstance(record, SystemKind):
+            raise TypeError(f"{module.__name__} registers no kind: it needs SYSTEM_KIND = SystemKind(...)")
+        if record.name in kinds:
+            raise ValueError(f"two modules register the kind {record.name!r}: {kinds[record.name].module.__name__} "
+                             f"and {module.__name__}")
+        kinds[record.name] = record
+    return kinds
+
+
+#: Every kind by its request name: the built-in ones, then those of other distributions.
+KINDS: dict[str, SystemKind] = _collect()
+#: The catalog kinds (parameters and a potential, not written by the user) by name, to their modules.
+SYSTEMS: dict[str, ModuleType] = {name: k.module for name, k in KINDS.items() if not k.written_by_user}
+#: Built-in potentials each catalog kind accepts (besides a user's expression, :func:`user_potential`).
+SUPPORTED_POTENTIALS: dict[str, tuple[str, ...]] = {kind: tuple(m.POTENTIALS) for kind, m in SYSTEMS.items()}
+#: The names a potential of each catalog kind may use.
 POTENTIAL_NAMES: dict[str, list[str]] = {kind: potential_symbols(m.POTENTIAL_VARIABLES) for kind, m in SYSTEMS.items()}

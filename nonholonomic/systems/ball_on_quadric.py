@@ -44,6 +44,7 @@ B = adj(A)/det A.
 
 from __future__ import annotations
 
+import sys
 from functools import cache, lru_cache
 
 import numpy as np
@@ -65,6 +66,7 @@ from nonholonomic.definition import (
     upper_triangle,
     vector_symbols,
 )
+from nonholonomic.kinds import Sampling, SystemKind, root_words
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, catalog_of, harmonic, linear, resolve
 
@@ -301,3 +303,18 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
         ),
         notes=tuple(notes),
     )
+
+
+
+def _sampling_words(names: tuple[str, ...]) -> str:
+    if "K" not in names:
+        return f"x uniform by area on the quadric; omega = t u with u uniform on the sphere; {root_words('eq. 2804-2')}"
+    return ("x uniform by area on the quadric; with K fixed, omega = w + a n, w ⊥ n of uniform direction and size set "
+            "by K (eq. 2804-4), a = ±sqrt(2 (h - U(x) - (D0 + D) w^2/2)/D0), either sign with probability 1/2 (eq. "
+            "2804-2); else omega = t u with u uniform on the sphere; positions and directions that miss the level are "
+            "redrawn")
+
+
+#: The kind's record (nonholonomic.kinds): sampling on a level of H and K (eqs. 2804-2, 2804-4).
+SYSTEM_KIND = SystemKind(sys.modules[__name__], sampling=Sampling("ball_on_quadric", "omega", ("energy", "K"),
+                                                                  "eq. 2804-2", describe=_sampling_words))

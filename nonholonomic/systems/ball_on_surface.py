@@ -25,6 +25,7 @@ derivatives). An initial x off the surface is projected by Newton's steps along 
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -43,6 +44,7 @@ from nonholonomic.definition import (
     gradient,
 )
 from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
+from nonholonomic.kinds import SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import (
     MAX_EXPRESSION_LENGTH,
@@ -211,3 +213,8 @@ def define(potential: str | Potential = "zero", on: Surface = DEFAULT_SURFACE) -
                "no integral besides Phi and H is claimed: in general there is none (paper, after eq. 2804-3); "
                "for a quadric, kind ball_on_quadric adds the Joachimsthal-like K"),
     )
+
+
+#: The kind's record (nonholonomic.kinds): it takes the user's surface Phi; no sampling plan (the extent of the
+#: surface's level sets is unknown).
+SYSTEM_KIND = SystemKind(sys.modules[__name__], surface=True)

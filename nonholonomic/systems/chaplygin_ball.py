@@ -14,6 +14,7 @@ checked in the tests.
 
 from __future__ import annotations
 
+import sys
 from functools import lru_cache
 
 import sympy as sp
@@ -34,6 +35,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.kinds import ExplorerPlane, Sampling, SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, brun, catalog_of, linear, resolve
 
@@ -147,3 +149,13 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
                                      projection=Projection("gamma", tuple(gamma / sp.sqrt(dot(gamma, gamma))),
                                                            "gamma -> gamma / |gamma|")),),
     )
+
+
+#: The kind's record (nonholonomic.kinds): sampling on a level of H and the area (eq. 2604-2), the Hamiltonian form
+#: after dτ = ρ_μ dt (eq. 2604-5..7) and its Euler-angle forms, the explorer's plane of the docs' chaos map.
+SYSTEM_KIND = SystemKind(
+    sys.modules[__name__],
+    sampling=Sampling("sphere_then_velocity", "M", ("energy", "area"), "eq. 2604-2", position="gamma", linear="area"),
+    hamiltonian_form=True, local_forms=True,
+    explorer_plane=ExplorerPlane("gamma3", ("gamma1", "M3"), {"energy": 2.0, "area": 0.0}),
+)

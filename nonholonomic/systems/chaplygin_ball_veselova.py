@@ -48,6 +48,7 @@ hence orthogonal to E × γ and E × (E × γ)); dH/dt = μ (ω, E), so the ener
 
 from __future__ import annotations
 
+import sys
 from functools import cache, lru_cache
 
 import sympy as sp
@@ -65,6 +66,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.kinds import Sampling, SystemKind, root_words
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, catalog_of, linear, resolve
 from nonholonomic.systems.chaplygin_ball import (
@@ -248,3 +250,15 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
             "and the measure hold on all of R^9",
         ),
     )
+
+
+#: The kind's record (nonholonomic.kinds): sampling on a level of H and (gamma, E).
+SYSTEM_KIND = SystemKind(
+    sys.modules[__name__],
+    sampling=Sampling(
+        "chaplygin_ball_veselova", "omega", ("energy", "gamma_E"), "text after eq. 2704-5",
+        describe=lambda names: "gamma uniform on the sphere; E uniform on the sphere, or E = (gamma, E) gamma + "
+                               "sqrt(1 - (gamma, E)^2) v with v uniform among unit vectors ⊥ gamma if (gamma, E) is "
+                               "fixed; omega = t u with u uniform among unit vectors ⊥ E; "
+                               + root_words("text after eq. 2704-5")),
+)

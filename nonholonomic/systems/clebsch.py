@@ -37,6 +37,7 @@ the caller gives; its sign only reverses time, and the same H generates (2504-13
 
 from __future__ import annotations
 
+import sys
 from functools import lru_cache
 
 import sympy as sp
@@ -54,6 +55,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.kinds import Sampling, SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, catalog_of, resolve
 
@@ -212,3 +214,10 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
             "any value is integrated",
         ),
     )
+
+
+#: The kind's record (nonholonomic.kinds): sampling on a level of H and the area (s, L).
+SYSTEM_KIND = SystemKind(
+    sys.modules[__name__],
+    sampling=Sampling("sphere_then_velocity", "L", ("energy", "area"), "eq. 2504-13", position="s", linear="area"),
+)

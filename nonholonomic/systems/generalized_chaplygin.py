@@ -28,6 +28,7 @@ coordinate, velocity and parameter names.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -43,6 +44,7 @@ from nonholonomic.definition import (
     StateVector,
 )
 from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
+from nonholonomic.kinds import SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, smooth_potential
 from nonholonomic.refusals import RefusedField
@@ -232,7 +234,7 @@ def theorem_1(data: ChaplyginData) -> tuple[Any, str]:
     theorem = result.bracket
     assert theorem is not None  # set with the reducing multiplier
     bracket = PoissonStructure(
-        "generalized_chaplygin", "2704-9", theorem.variables, -theorem.matrix, parameters=theorem.parameters,
+        KIND, "2704-9", theorem.variables, -theorem.matrix, parameters=theorem.parameters,
         formula="{q_i, p_j} = delta_ij, {p1, p2} = S_bar(q) with dx/dtau = {x, H_bar} (Theorem 1); stored with the "
                 "opposite sign for the convention dx/dtau = {H, x}")
     symbolic = result.verification.get("symbolic")
@@ -297,3 +299,21 @@ def define(data: ChaplyginData, reduce: bool = True) -> MechanicalSystem:
                *([] if form is not None else [f"no Hamiltonian form: {why}"])),
         hamiltonian_form=form,
     )
+
+
+def catalog_entry() -> dict[str, Any]:
+    """How to pose a generalized Chaplygin system (its entry of ``GET /v1/systems``)."""
+    return {
+        "kind": KIND, "title": TITLE, "equation": "2704-7, 2704-8, 2704-9 (Theorem 1)",
+        "fields": {"coordinates": "names of q1, q2", "velocities": "names of q1_dot, q2_dot",
+                   "parameters": "every constant of the expressions, with its value",
+                   "L": "L(q, q_dot), quadratic in the velocities",
+                   "a1": "S = a1(q) q1_dot + a2(q) q2_dot + b(q)", "a2": "see a1", "b": "see a1",
+                   "potential": "U(q) subtracted from L (optional)"},
+        "state": ["q", "q_dot"], "checks": ["integrals", "measure", "bracket"], "example": EXAMPLE_JOB}
+
+
+#: The kind's record (nonholonomic.kinds): written by the user, its structure from Theorem 1.
+SYSTEM_KIND = SystemKind(
+    sys.modules[__name__], written_by_user=True, theorem_1=True, catalog_entry=catalog_entry,
+    singular_field="the kinetic matrix d2L/dq_dot2 is singular there, or L, S or U is")

@@ -34,6 +34,7 @@ Jobs integrate autonomous systems: an L or a constraint with the time t explicit
 
 from __future__ import annotations
 
+import sys
 from dataclasses import replace
 from functools import lru_cache
 from typing import Any
@@ -49,14 +50,16 @@ from nonholonomic.definition import (
     StateConstraint,
     StateVector,
 )
+from nonholonomic.kinds import SystemKind
 from nonholonomic.lagrangian import DataError, LagrangianData, derive
 from nonholonomic.lagrangian.checks import number, sample_points
 from nonholonomic.lagrangian.equations import energy_of, plain_field
 from nonholonomic.lagrangian.hamiltonization_search import hamiltonization
 from nonholonomic.lagrangian.integral_search import integral_search
 from nonholonomic.lagrangian.measure_search import measure_verdict
-from nonholonomic.lagrangian.parse import KIND, MAX_COORDINATES
+from nonholonomic.lagrangian.parse import KIND, MAX_COORDINATES, RESERVED, VELOCITY_SUFFIX
 from nonholonomic.memo import remembered
+from nonholonomic.systems.lagrangian_classics import CLASSICS
 
 __all__ = ["CONSTRAINT_TOLERANCE", "EXAMPLE", "EXAMPLE_JOB", "KIND", "MAX_COORDINATES", "TITLE", "define", "outline"]
 
@@ -269,3 +272,40 @@ def _assemble(data: LagrangianData, rhs: tuple[sp.Expr, ...], reduce: bool, gene
         structure=structure,
         hamiltonian_form=form,
     )
+
+
+def catalog_entry() -> dict[str, Any]:
+    """How to pose a Lagrangian system with constraints linear in the velocities (``GET /v1/systems/lagrangian``)."""
+    return {
+        "kind": KIND, "title": TITLE, "equation": EQUATION,
+        "fields": {"coordinates": f"names of the generalized coordinates q (1 to {MAX_COORDINATES}); the velocity "
+                                  f"of x is x{VELOCITY_SUFFIX}",
+                   "L": "L(q, q_dot), a polynomial of degree 2 in the velocities with a regular mass matrix "
+                        "d2L/dq_dot2 (a potential is part of it: L = T - U); no explicit time t",
+                   "constraints": "each sum_j a_j(q) q_j_dot (meaning = 0): linear and homogeneous in the velocities, "
+                                  "independent, fewer than the coordinates",
+                   "parameters": "every constant of L and the constraints, with its value"},
+        "max_coordinates": MAX_COORDINATES, "reserved_names": sorted(RESERVED),
+        "state": ["q", "q_dot"],
+        "integrals": ["energy: E = (q_dot, dL/dq_dot) - L",
+                      "constraint i: the i-th constraint, 0 along the motion"],
+        "measure": MEASURE_SEARCH,
+        "initial_state": f"q and q_dot, one component per coordinate; q_dot must satisfy every constraint to "
+                         f"{CONSTRAINT_TOLERANCE:g} times its terms, or project_initial_state projects it",
+        "integrals_search": "integrals linear and quadratic in the velocities, sought with the job in a polynomial "
+                            "ansatz at the parameters' values, each proven and then checked along the trajectory "
+                            "(result.system.structure.integrals; one missing is not in the ansatz, not proven absent)",
+        "hamiltonization": "when the system is a Chaplygin system with two shape coordinates (eq. 2704-7): Theorem "
+                           "1's reducing multiplier N, the time d tau = N dt and the Hamiltonian form, checked by the "
+                           "'bracket' check (result.system.structure.hamiltonization)",
+        "checks": ["integrals", "measure", "bracket"], "example": EXAMPLE_JOB,
+        "classics": {name: {key: classic[key] for key in ("title", "job", "facts", "measure", "hamiltonization",
+                                                          "references")}
+                     for name, classic in CLASSICS.items()}}
+
+
+#: The kind's record (nonholonomic.kinds): written by the user; Theorem 1's structure when it is a Chaplygin system
+#: with two shape coordinates.
+SYSTEM_KIND = SystemKind(
+    sys.modules[__name__], written_by_user=True, theorem_1=True, catalog_entry=catalog_entry,
+    singular_field="the mass matrix d2L/dq_dot2 (or A M^-1 A^T) is singular there, or L or a constraint is")

@@ -26,11 +26,13 @@ H and the Casimirs.
 
 from __future__ import annotations
 
+import sys
 from functools import lru_cache
 
 import sympy as sp
 
 from nonholonomic.definition import FirstIntegral, MechanicalSystem, Parameter, dot
+from nonholonomic.kinds import SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, catalog_of, resolve
 from nonholonomic.systems import clebsch
@@ -118,3 +120,7 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
             "k = +sqrt(det I) (ERRATA 4)",
         ),
     )
+
+
+#: The kind's record (nonholonomic.kinds): sampling on a level of H and the area (s, L), as the Clebsch system's.
+SYSTEM_KIND = SystemKind(sys.modules[__name__], sampling=clebsch.SYSTEM_KIND.sampling)

@@ -29,6 +29,7 @@ the constant √det J) and the reduced time dτ = dt / (ρ √det J) of the Vese
 
 from __future__ import annotations
 
+import sys
 from functools import lru_cache
 
 import sympy as sp
@@ -47,6 +48,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.kinds import Sampling, SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, catalog_of, linear, resolve
 from nonholonomic.systems.chaplygin_ball import I1, I2, I3, D, J, J_inv, contact_inertia, det_J, inertia
@@ -159,3 +161,11 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
             "I_Q dw/dt = J dw/dt - D (dw/dt, gamma) gamma; the printed 'J omega' lacks the dot (ERRATA 10)",
         ),
     )
+
+
+#: The kind's record (nonholonomic.kinds): sampling on an energy level.
+SYSTEM_KIND = SystemKind(
+    sys.modules[__name__],
+    sampling=Sampling("sphere_then_velocity", "omega", ("energy",), "text after eq. 2704-5", position="gamma",
+                      plane=True),
+)

@@ -17,6 +17,7 @@ Hamiltonization on e(3) is dτ = dt / (ρ_ω √det I) (text before eq. 2504-10-
 
 from __future__ import annotations
 
+import sys
 from functools import lru_cache
 
 import sympy as sp
@@ -35,6 +36,7 @@ from nonholonomic.definition import (
     gradient,
     vector_symbols,
 )
+from nonholonomic.kinds import Sampling, SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, brun, catalog_of, linear, quadratic, resolve
 
@@ -130,3 +132,12 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
         notes=("mu = -(I omega x omega + gamma x dU/dgamma, I^-1 gamma) / (gamma, I^-1 gamma): derived from "
                "d/dt (omega, gamma) = 0; the printed eq. 2504-2 has the opposite sign (ERRATA 1)",),
     )
+
+
+#: The kind's record (nonholonomic.kinds): sampling on an energy level, the Hamiltonian form after the time
+#: substitution (eq. 2504-10-2) and its Euler-angle forms (eq. 2504-6..9, Theorem 2).
+SYSTEM_KIND = SystemKind(
+    sys.modules[__name__],
+    sampling=Sampling("sphere_then_velocity", "omega", ("energy",), "eq. 2504-3", position="gamma", plane=True),
+    hamiltonian_form=True, local_forms=True,
+)

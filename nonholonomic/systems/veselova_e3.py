@@ -17,6 +17,7 @@ Both are constraints of this kind, with projections.
 
 from __future__ import annotations
 
+import sys
 from functools import lru_cache
 
 import sympy as sp
@@ -32,6 +33,7 @@ from nonholonomic.definition import (
     dot,
 )
 from nonholonomic.hamiltonization.poisson import e3
+from nonholonomic.kinds import Sampling, SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import ZERO, Potential, catalog_of, resolve
 from nonholonomic.systems.clebsch import I1, I2, I3, INERTIA, inertia
@@ -139,3 +141,10 @@ def define(potential: str | Potential = "zero") -> MechanicalSystem:
 
 __all__ = ["KIND", "TITLE", "PARAMETERS", "POTENTIALS", "POTENTIAL_VARIABLES", "STATE", "EXAMPLE", "define",
            "I1", "I2", "I3"]
+
+
+#: The kind's record (nonholonomic.kinds): sampling on an energy level.
+SYSTEM_KIND = SystemKind(
+    sys.modules[__name__],
+    sampling=Sampling("sphere_then_velocity", "M", ("energy",), "eq. 2504-12", position="Gamma", plane=True),
+)

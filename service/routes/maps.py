@@ -8,7 +8,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from nonholonomic.isomorphisms import MAPS, SOURCE_KINDS, describe, get_map, map_states
+from nonholonomic.isomorphisms import MAPS, describe, get_map, map_states
 from schemas.maps import MapList, MapRequest, MapResult
 from schemas.problems import NOT_FOUND, FieldError
 from service.errors import ProblemError, invalid_request, problem_responses
@@ -20,9 +20,9 @@ router = APIRouter(prefix="/v1/maps", tags=["maps"], generate_unique_id_function
 @router.get("", operation_id="maps-list", response_model=MapList, response_model_exclude_unset=True,
             summary="The isomorphisms: source, target, time substitution, level set, corrections")
 def list_maps() -> dict[str, Any]:
-    return {"maps": [describe(get_map(name, (potentials or ("zero",))[0])) | {
-        "source_potentials": list(potentials) if potentials else "all of the source's"}
-        for name, (_, potentials) in MAPS.items()]}
+    return {"maps": [describe(get_map(name, (entry.potentials or ("zero",))[0])) | {
+        "source_potentials": list(entry.potentials) if entry.potentials else "all of the source's"}
+        for name, entry in MAPS.items()]}
 
 
 @router.post("/{name}", operation_id="maps-apply", response_model=MapResult, response_model_exclude_unset=True,
@@ -34,9 +34,9 @@ def apply_map(name: str, request: MapRequest) -> dict[str, Any]:
     if name not in MAPS:
         raise ProblemError(404, "Unknown map", f"no map {name!r}; known: {', '.join(MAPS)}", NOT_FOUND)
     kind: str = request.system.kind  # type: ignore[attr-defined]  # create_model's field
-    if kind != SOURCE_KINDS[name]:
+    if kind != MAPS[name].source:
         raise invalid_request([FieldError(field="system.kind", reason=(
-            f"{name} maps from {SOURCE_KINDS[name]}, not {kind}"))])
+            f"{name} maps from {MAPS[name].source}, not {kind}"))])
     potential: str = request.system.potential.kind  # type: ignore[attr-defined]  # create_model's field
     try:
         m = get_map(name, potential)

@@ -7,9 +7,7 @@ from typing import Any
 from fastapi import APIRouter
 
 from nonholonomic.catalog import catalog, describe
-from nonholonomic.systems import SYSTEMS
-from nonholonomic.systems.generalized_chaplygin import KIND as GENERALIZED_CHAPLYGIN
-from nonholonomic.systems.lagrangian import KIND as LAGRANGIAN
+from nonholonomic.systems import KINDS, SYSTEMS
 from schemas.catalog import Catalog, CatalogGeneralizedChaplygin, CatalogLagrangian, SystemDescription
 from schemas.problems import NOT_FOUND
 from service.errors import ProblemError, did_you_mean, problem_responses
@@ -40,13 +38,12 @@ def _linked(entry: dict[str, Any]) -> dict[str, Any]:
             response_model_exclude_unset=True, responses=problem_responses({404: "unknown system kind"}),
             summary="One kind of the catalog (generalized_chaplygin, lagrangian: how to pose a system of one's own)")
 def get_system(kind: str) -> dict[str, Any]:
-    """A kind of :data:`SYSTEMS` as a ``SystemDescription``; ``generalized_chaplygin`` and ``lagrangian`` (systems
-    the request writes itself) as the catalog's entries of those names, a ``CatalogGeneralizedChaplygin`` and a
-    ``CatalogLagrangian``."""
+    """A catalog kind as a ``SystemDescription``; a kind written by the user (``generalized_chaplygin``,
+    ``lagrangian``: systems the request writes itself) as the catalog's entry of that name, a
+    ``CatalogGeneralizedChaplygin`` and a ``CatalogLagrangian``."""
     if kind in SYSTEMS:
         return _linked(describe(kind))
-    if kind in (GENERALIZED_CHAPLYGIN, LAGRANGIAN):
+    if kind in KINDS:
         return catalog()[kind]
-    known = [*SYSTEMS, GENERALIZED_CHAPLYGIN, LAGRANGIAN]
     raise ProblemError(404, "Unknown system kind",
-                       f"no system kind {kind!r}{did_you_mean(kind, known)}; known: {sorted(known)}", NOT_FOUND)
+                       f"no system kind {kind!r}{did_you_mean(kind, list(KINDS))}; known: {sorted(KINDS)}", NOT_FOUND)

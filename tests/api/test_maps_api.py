@@ -7,7 +7,7 @@ import copy
 import numpy as np
 import pytest
 
-from nonholonomic.isomorphisms import SOURCE_KINDS
+from nonholonomic.isomorphisms import MAPS
 from nonholonomic.systems import SYSTEMS
 from tests.support import poll_job
 
@@ -103,7 +103,7 @@ def test_veselova_to_e3_and_back(client):
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "states[0].omega"
 
 
-@pytest.mark.parametrize("kind", sorted(set(SOURCE_KINDS.values())))
+@pytest.mark.parametrize("kind", sorted({entry.source for entry in MAPS.values()}))
 def test_isomorphisms_job_check_on_the_catalog_examples(client, kind):
     # the kinds are the maps' sources (read at collection without deriving a system); the catalog offers the check
     assert "isomorphisms" in client.get(f"/v1/systems/{kind}").json()["checks"]

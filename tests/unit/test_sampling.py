@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nonholonomic.analysis.sampling import RECIPES, LevelError, describe_sampling, fixable, on_level
+from nonholonomic.analysis.sampling import LevelError, describe_sampling, fixable, on_level
 from nonholonomic.catalog import describe
 from nonholonomic.initial_state import vector_slice
 from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vector
-from nonholonomic.systems import SUPPORTED_POTENTIALS, SURFACE_KINDS, SYSTEMS, get_system
+from nonholonomic.systems import KINDS, SUPPORTED_POTENTIALS, SYSTEMS, get_system
 
 #: Parameters of the potentials the catalog examples (all U = 0) do not give.
 POTENTIAL_PARAMETERS = {
@@ -20,7 +20,7 @@ POTENTIAL_PARAMETERS = {
 }
 # A ball on the user's surface draws no level (its extent is unknown): test_a_users_surface_samples_no_level.
 CASES = [(kind, potential) for kind, potentials in SUPPORTED_POTENTIALS.items() for potential in potentials
-         if kind not in SURFACE_KINDS]
+         if not KINDS[kind].surface]
 BALL = {"inertia": [2.0, 3.0, 4.5], "D": 0.7}
 JACOBI = {"D0": 0.036, "m": 1.0, "R": 0.3, "B": [1.0, 2.0, 3.0]}
 
@@ -73,7 +73,9 @@ def test_a_users_surface_samples_no_level():
 
 
 def test_every_kind_has_a_recipe_and_energy_is_fixable():
-    assert set(RECIPES) == set(SYSTEMS) - SURFACE_KINDS
+    """Every catalog kind but the user's surface has a sampling plan in its record; kinds written by the user none."""
+    assert {k for k, record in KINDS.items() if record.sampling is not None} == {
+        k for k in SYSTEMS if not KINDS[k].surface}
     for kind, potential in CASES:
         system = get_system(kind, potential)
         names = fixable(system)
@@ -117,7 +119,9 @@ def test_energy_is_quadratic_in_the_velocity(kind, potential):
     at other t for random positions and velocities."""
     system, p, y = example(kind, potential)
     rng = np.random.default_rng(0)
-    velocity = vector_slice(system, RECIPES[kind].velocity)
+    plan = KINDS[kind].sampling
+    assert plan is not None
+    velocity = vector_slice(system, plan.velocity)
     states = np.tile(y, (20, 1)) + 0.3 * rng.standard_normal((20, system.dimension))
     u = rng.standard_normal((20, 3))
 
@@ -137,7 +141,7 @@ def test_catalog_lists_the_levels_of_every_kind_and_potential():
             system = get_system(kind, entry["kind"])
             assert entry["levels"] == list(fixable(system))
             assert entry["sampling"] == describe_sampling(system)
-            assert ("uniform" if kind not in SURFACE_KINDS else "initial states") in entry["sampling"]
+            assert ("uniform" if not KINDS[kind].surface else "initial states") in entry["sampling"]
 
 
 # --- Chaplygin's ball -----------------------------------------------------------------------------

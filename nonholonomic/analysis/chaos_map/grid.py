@@ -36,7 +36,7 @@ import numpy as np
 
 from nonholonomic.analysis.chaos_map.grid_velocity import VelocityError, quadratic_roots, velocities
 from nonholonomic.analysis.poincare.surface import SurfaceError, parse_surface
-from nonholonomic.analysis.sampling import RECIPES, LevelError, fixable, on_level, verified
+from nonholonomic.analysis.sampling import LevelError, fixable, no_plan, on_level, plan_of, verified
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import vector_slice
 from nonholonomic.numerics.kernels import NumericSystem, VectorKernel, numeric, vectorize
@@ -133,9 +133,9 @@ def plan(system: MechanicalSystem, grid: Grid) -> _Plan:
         A name that is not a state component, a level the sampler cannot fix, a position left with
         more than one free component, a velocity not fixed to a line.
     """
-    if system.kind not in RECIPES:
-        raise GridError("level", f"{system.kind} has no recipe for states on a level set (the system is the user's "
-                                 "own: the extent of its level sets is unknown); a map needs one")
+    sampling = plan_of(system)
+    if sampling is None:
+        raise GridError("level", f"{system.kind}: {no_plan(system)}; a map needs states on a level set")
     names = [grid.surface, *grid.coordinates]
     idx = []
     for field, name in zip(["surface", "coordinates[0]", "coordinates[1]"], names):
@@ -155,7 +155,7 @@ def plan(system: MechanicalSystem, grid: Grid) -> _Plan:
                                              + ", ".join(names_fixable))
     if "energy" not in grid.level:
         raise GridError("level.energy", "required: the energy sets the size of the velocities")
-    velocity_name = RECIPES[system.kind].velocity
+    velocity_name = sampling.velocity
     vectors = {vec.name: range(*vector_slice(system, vec.name).indices(system.dimension)) for vec in system.state}
     velocity = tuple(vectors[velocity_name])
     positions = []
