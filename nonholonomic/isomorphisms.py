@@ -32,10 +32,22 @@ from nonholonomic.definition import (
     dot,
 )
 from nonholonomic.evidence.measure import CheckEvidence
+from nonholonomic.hamiltonization.forms import hamiltonian_form
 from nonholonomic.initial_state import constraint_problems, initial_state_problems, project_initial_state, vector_slice
 from nonholonomic.numerics.integration import integrate
-from nonholonomic.numerics.kernels import VectorKernel, vectorize
+from nonholonomic.numerics.kernels import VectorKernel, parameter_vector, state_vector, vectorize
 from nonholonomic.refusals import RefusedFields
+from nonholonomic.systems import (
+    SUPPORTED_POTENTIALS,
+    SYSTEMS,
+    chaplygin_ball as ball,
+    clebsch,
+    get_system,
+    neumann,
+    rubber_ball as rb,
+    veselova as ves,
+    veselova_e3 as ve3,
+)
 
 #: Relative push-forward residual accepted as round-off.
 PUSH_FORWARD_TOLERANCE = 1e-10
@@ -108,8 +120,6 @@ def _sqrt_diag(entries: Sequence[sp.Expr], power: sp.Rational) -> sp.Matrix:
 def _e3_target(source: MechanicalSystem) -> MechanicalSystem:
     """Veselova's system after the time substitution as a system of its own: e(3), H (2504-11),
     dx/dτ = {H, x}, any of Veselova's potentials (Ũ(Γ) = U(γ(Γ)))."""
-    from nonholonomic.hamiltonization.forms import hamiltonian_form
-    from nonholonomic.systems import veselova_e3 as ve3
 
     form = hamiltonian_form(source)
     assert form is not None
@@ -134,8 +144,6 @@ def _e3_target(source: MechanicalSystem) -> MechanicalSystem:
 def veselova_to_e3(potential: str = "zero") -> IsomorphismMap:
     """Eq. (2504-10-2): M = ρ_ω I^(1/2) ω, Γ = ρ_ω⁻¹ I^(−1/2) γ, dτ = dt/(ρ_ω √det I), any potential;
     the inverse ω = (Γ, IΓ)^(1/2) I^(−1/2) M, γ = (Γ, IΓ)^(−1/2) I^(1/2) Γ."""
-    from nonholonomic.hamiltonization.forms import hamiltonian_form
-    from nonholonomic.systems import get_system
 
     source = get_system("veselova", potential)
     form = hamiltonian_form(source)
@@ -169,7 +177,6 @@ def _proposition_1(I_diag: Sequence[sp.Expr], M: sp.Matrix, G: sp.Matrix) -> tup
 def e3_to_clebsch() -> IsomorphismMap:
     """Proposition 1: (M, Γ) of eq. (2504-12) on Γ² = 1, (M, Γ) = 0 → (s, L) of the Clebsch case
     (2504-13) with the same α, β, I, c = M²(Γ, IΓ)/det I and k = +√det I (ERRATA 4), same time."""
-    from nonholonomic.systems import clebsch, get_system, veselova_e3 as ve3
 
     source, target = get_system("veselova_e3"), get_system("clebsch")
     I_diag = (ve3.I1, ve3.I2, ve3.I3)
@@ -198,11 +205,9 @@ def veselova_to_neumann() -> IsomorphismMap:
     """The theorem after Proposition 1 (U = 0): Veselova → e(3) (2504-10-2) composed with
     Proposition 1 at α = 1, β = 0. It gives s = γ, L = ρ_ω ω, and the Neumann problem with the same
     I, c = 2h/det I (h the energy) and k = +√det I in τ (dτ = dt/(ρ_ω √det I))."""
-    from nonholonomic.systems import get_system, neumann
 
     e3_map = veselova_to_e3("zero")
     source, target = e3_map.source, get_system("neumann")
-    from nonholonomic.systems import veselova as ves
 
     I_diag = (ves.I1, ves.I2, ves.I3)
     to_e3 = dict(zip(e3_map.target.state_symbols, e3_map.forward))
@@ -230,7 +235,6 @@ def chaplygin_ball_to_clebsch() -> IsomorphismMap:
     """Theorem 3 as corrected by ERRATA 8 (U = 0, (M, γ) = 0): L = ρ_μ M, s = (γ, Bγ)^(−1/2) B^(1/2) γ,
     L̃ = B^(−1/2) L, B = I J⁻¹; the Clebsch case with I → B, α = −β = det J / D, c = L²(γ, Bγ)/det B,
     k = +√det B, in τ (dτ = ρ_μ dt)."""
-    from nonholonomic.systems import chaplygin_ball as ball, clebsch, get_system
 
     source, target = get_system("chaplygin_ball", "zero"), get_system("clebsch")
     assert source.reduced_time is not None
@@ -266,7 +270,6 @@ def chaplygin_ball_to_clebsch() -> IsomorphismMap:
 @cache
 def rubber_ball_to_veselova(potential: str = "zero") -> IsomorphismMap:
     """The rubber-ball paragraph (ERRATA 10): the same (ω, γ) and time, Veselova's system with I → J = I + D·1."""
-    from nonholonomic.systems import get_system, rubber_ball as rb, veselova as ves
 
     source, target = get_system("rubber_ball", potential), get_system("veselova", potential)
     values = {ves.I1: rb.I1 + rb.D, ves.I2: rb.I2 + rb.D, ves.I3: rb.I3 + rb.D}
@@ -326,7 +329,6 @@ def get_map(name: str, potential: str = "zero") -> IsomorphismMap:
 def maps_for(kind: str, potential: str) -> list[str]:
     """Names of the maps whose source is ``kind`` with ``potential`` (a built-in one: the maps are
     derived for named potentials, not for a user's expression)."""
-    from nonholonomic.systems import SUPPORTED_POTENTIALS
 
     return [name for name, entry in MAPS.items()
             if entry.source == kind and potential in (entry.potentials or SUPPORTED_POTENTIALS[kind])]
@@ -569,7 +571,6 @@ def _vectors(system: MechanicalSystem, row: np.ndarray) -> dict[str, list[float]
 
 def describe(m: IsomorphismMap) -> dict[str, object]:
     """The map in words: source, target, time, level set, constants and corrections."""
-    from nonholonomic.systems import SYSTEMS
 
     return {
         "name": m.name, "title": m.title, "equation": m.equation, "formula": m.formula,
@@ -606,7 +607,6 @@ def map_states(m: IsomorphismMap, parameters: dict[str, object], states: Sequenc
         Unknown or missing vectors, or a state off the level set where the map holds (the
         condition, its value and the tolerance are named).
     """
-    from nonholonomic.numerics.kernels import parameter_vector, state_vector
 
     p = parameter_vector(m.source, dict(parameters))
     problems: list[tuple[str, str]] = []
@@ -686,7 +686,6 @@ def _header(m: IsomorphismMap, p: np.ndarray) -> dict[str, object]:
 
 def _job_system(m: IsomorphismMap, p_target: np.ndarray) -> dict[str, object] | None:
     """The target as a job's ``system`` block (for the first state), or None if it is not a job kind."""
-    from nonholonomic.systems import SYSTEMS
 
     if m.target.kind not in SYSTEMS:
         return None

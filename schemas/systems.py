@@ -421,8 +421,7 @@ def definition_of(system_json: Mapping[str, Any]) -> MechanicalSystem:
 @lru_cache(maxsize=64)
 def _definition_of(system_text: str) -> MechanicalSystem:
     spec = _system_spec(system_text)
-    kind: str = spec.kind  # type: ignore[attr-defined]  # create_model's field
-    return spec.validation_definition() if KINDS[kind].written_by_user else spec.definition()
+    return spec.validation_definition() if type(spec) in USER_WRITTEN_MODELS.values() else spec.definition()
 
 
 # --------------------------------------------------------------------------------------------------

@@ -62,6 +62,7 @@ from nonholonomic.definition import MechanicalSystem, dot
 from nonholonomic.evidence.measure import CheckEvidence
 from nonholonomic.hamiltonization.poisson import PoissonStructure, chaplygin_ball_bracket, e3
 from nonholonomic.numerics.kernels import VectorKernel, numeric, vectorize
+from nonholonomic.systems import chaplygin_ball as ball, veselova as ves
 from nonholonomic.work_limits import WorkLimits, operations, over
 
 #: Pointwise relative residual accepted as round-off.
@@ -117,7 +118,6 @@ def potential_of(system: MechanicalSystem) -> sp.Expr:
 
 def _veselova_form(system: MechanicalSystem) -> HamiltonianForm:
     """Eq. (2504-10-2), (2504-11) and the inverse map after them (see the module docstring)."""
-    from nonholonomic.systems import veselova as ves
 
     inertia = ves.inertia
     sqrt_I = sp.diag(*[sp.sqrt(i) for i in (ves.I1, ves.I2, ves.I3)])
@@ -160,7 +160,6 @@ def _veselova_form(system: MechanicalSystem) -> HamiltonianForm:
 
 def _ball_form(system: MechanicalSystem) -> HamiltonianForm:
     """Eq. (2604-5) … (2604-7), read as in ERRATA 5 (dL_k/dτ = {H, L_k}, H = energy 2604-2)."""
-    from nonholonomic.systems import chaplygin_ball as ball
 
     rho = ball.measure_density()  # ρ_μ = det(I_Q)^(−1/2), eq. (2604-3)
     bracket = chaplygin_ball_bracket()
@@ -309,7 +308,6 @@ def _root_base(radicand: sp.Expr) -> sp.Expr:
 
 
 def _veselova_leaf(form: HamiltonianForm) -> _Leaf:
-    from nonholonomic.systems import veselova as ves
 
     j = sp.symbols("j1:4", positive=True)
     param_subs = {ves.I1: j[0] ** 2, ves.I2: j[1] ** 2, ves.I3: j[2] ** 2}  # I^(1/2) = diag(j)
@@ -328,7 +326,6 @@ def _veselova_leaf(form: HamiltonianForm) -> _Leaf:
 
 
 def _ball_leaf(form: HamiltonianForm) -> _Leaf:
-    from nonholonomic.systems import chaplygin_ball as ball
 
     c = sp.symbols("c1:4", positive=True)
     param_subs = {ball.I1: c[0] ** 2 - ball.D, ball.I2: c[1] ** 2 - ball.D, ball.I3: c[2] ** 2 - ball.D}  # J_i = c_i^2

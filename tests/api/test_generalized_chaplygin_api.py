@@ -4,6 +4,7 @@ Hamiltonian form, its page and plots render, bad fields are 422 problems naming 
 from __future__ import annotations
 
 import copy
+import html
 
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE_JOB
 from tests.support import poll_job
@@ -26,6 +27,12 @@ def test_the_example_job_runs_with_its_hamiltonian_form_page_and_plots(client):
     assert result["integrals"][0]["name"] == "energy" and result["integrals"][0]["max_rel_drift"] < 1e-12
     page = client.get(f"{r.headers['location']}/page")
     assert page.status_code == 200 and "generalized_chaplygin" in page.text
+    # what the user wrote: the coordinates and velocities by name, and every expression (HTML-escaped)
+    system = EXAMPLE_JOB["system"]
+    assert f"<dt>q</dt><dd><code>{', '.join(system['coordinates'])}</code></dd>" in page.text
+    assert f"<dt>q_dot</dt><dd><code>{', '.join(system['velocities'])}</code></dd>" in page.text
+    for field in ("L", "a1", "a2", "b"):
+        assert f"<dt>{field}</dt><dd><code>{html.escape(system[field])}</code></dd>" in page.text
     for name in ("trajectory", "integrals"):
         plot = client.get(f"{r.headers['location']}/plots/{name}.png")
         assert plot.status_code == 200 and plot.headers["content-type"] == "image/png", plot.text
