@@ -71,6 +71,9 @@ class SystemInfo(BaseModel):
     potential_formula: str
     parameters: dict[str, Any]
     units: dict[str, str]
+    components: dict[str, list[str]] | None = Field(
+        None, description="the name of each component of every state and derived vector, as the exports' columns "
+                          "and NetCDF variables call it: M1 ..., a system's own coordinates (x, theta, x_dot ...)")
     structure: dict[str, Any] | None = Field(
         None, description="for a system written by the user (kind lagrangian): what the structure search found, "
                           "each with its verdict: 'measure' (found / none / undecided, the density and why), "
@@ -155,6 +158,18 @@ def system_units(system: MechanicalSystem) -> dict[str, str]:
     return units
 
 
+def component_names(system: MechanicalSystem) -> dict[str, list[str]]:
+    """The name of each component of every state and derived vector of ``system``: its symbols (``M1`` ...; the
+    user's own coordinates and velocities, ``x``, ``theta``, ``x_dot`` ...), ``omega1`` ... for a derived
+    vector; every vector numbered (``q1`` ...) if the symbols would repeat a name or be ``t``, ``tau`` or
+    ``member`` (the exports' other columns)."""
+    numbered = {v.name: [f"{v.name}{k + 1}" for k in range(len(v.symbols))] for v in system.state}
+    numbered.update({d.name: [f"{d.name}{k + 1}" for k in range(len(d.expression))] for d in system.derived})
+    own = {**numbered, **{v.name: [str(s) for s in v.symbols] for v in system.state}}
+    flat = [name for names in own.values() for name in names]
+    return numbered if len(set(flat)) < len(flat) or set(flat) & {"t", "tau", "member"} else own
+
+
 #: The fields of an answer that say how long, or when, something was computed, or whether it was read back:
 #: the only ones in which two runs of the same request may differ (quiet or loaded, cold or warm caches,
 #: embedded or queue mode). Each is removed wherever it appears by :func:`without_timing`.
@@ -182,7 +197,7 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
     return {
         "system": {"kind": system.kind, "title": system.title, "equation": system.equation,
                    "potential": system.potential, "potential_formula": system.potential_formula,
-                   "parameters": parameters, "units": units,
+                   "parameters": parameters, "units": units, "components": component_names(system),
                    **({"structure": system.structure} if system.structure is not None else {})},
         "initial_state": {name: values[0] for name, values in samples.items()},
         "projections": [asdict(p) for p in result.projections],

@@ -17,7 +17,7 @@ from nonholonomic.analysis.chaos_map.indicators import thresholds_for
 from nonholonomic.analysis.ensemble import summarize
 from schemas.results import system_units
 from schemas.systems import definition_of
-from service.exports import point_array, section_columns, vector_widths
+from service.exports import point_array, section_columns, vector_components
 from store.ensembles import EnsembleStore
 
 
@@ -96,9 +96,9 @@ def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
     each column and its unit (streamed a member at a time)."""
     header_written = False
     units = request_units(record["request"])
-    widths = vector_widths(record["request"]["system"])
+    names = vector_components(record["request"]["system"])
     for index, section in section_members(store, ensemble_id, record):
-        cols = section_columns(section, units, widths)
+        cols = section_columns(section, units, names)
         buffer = io.StringIO()
         writer = csv.writer(buffer)
         if not header_written:
@@ -114,20 +114,22 @@ def section_csv(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) 
 
 def section_npz(store: EnsembleStore, ensemble_id: str, record: dict[str, Any]) -> bytes:
     """Every member's crossings as NPZ arrays (``member``, ``t``, ``tau``, each point vector ``(n, k)``, k its
-    components), with the request and the units as JSON in ``request_json`` and ``units_json``."""
+    components), with the request, the units and the components' names as JSON in ``request_json``, ``units_json``
+    and ``components_json``."""
     parts: dict[str, list[np.ndarray]] = {"member": []}
-    widths = vector_widths(record["request"]["system"])
+    names = vector_components(record["request"]["system"])
     for index, section in section_members(store, ensemble_id, record):
         parts["member"].append(np.full(section["count"], index, dtype=np.int64))
         for key in ("t", "tau"):
             if section.get(key) is not None:
                 parts.setdefault(key, []).append(np.asarray(section[key], dtype=float))
         for name, values in section["points"].items():
-            parts.setdefault(name, []).append(point_array(values, section["count"], widths[name]))
+            parts.setdefault(name, []).append(point_array(values, section["count"], len(names[name])))
     arrays = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
     buffer = io.BytesIO()
     texts = {"request_json": np.array(json.dumps(record["request"])),
-             "units_json": np.array(json.dumps(request_units(record["request"])))}
+             "units_json": np.array(json.dumps(request_units(record["request"]))),
+             "components_json": np.array(json.dumps(names))}
     np.savez(buffer, **arrays, **texts)  # type: ignore[arg-type]  # numpy's stub: a **name may bind allow_pickle
     return buffer.getvalue()
 

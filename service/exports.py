@@ -37,45 +37,59 @@ def _vectors(samples: Mapping[str, Any]) -> list[str]:
     return [k for k in samples if k not in ("t", "tau")]
 
 
-def vector_widths(system_json: Mapping[str, Any]) -> dict[str, int]:
-    """Components of every state and derived vector of a request's system: the shape of a section's
-    points when there are no rows to read it from (2 for a generalized Chaplygin system's q, n for a
-    Lagrangian system's)."""
+def vector_components(system_json: Mapping[str, Any]) -> dict[str, list[str]]:
+    """The names of the components of every state and derived vector of a request's system
+    (:func:`schemas.results.component_names`: ``M1`` ..., a user's ``x``, ``theta``, ``x_dot`` ...); their
+    number is the shape of a section's points when there are no rows to read it from."""
+    from schemas.results import component_names
     from schemas.systems import definition_of
 
-    system = definition_of(dict(system_json))
-    return {**{v.name: len(v.symbols) for v in system.state}, **{d.name: len(d.expression) for d in system.derived}}
+    return component_names(definition_of(dict(system_json)))
+
+
+def result_components(result: Mapping[str, Any], request: Mapping[str, Any]) -> dict[str, list[str]]:
+    """A job's component names: its result's (``system.components``), or its request's for a result stored
+    before results carried them."""
+    return dict(result["system"].get("components") or vector_components(request["system"]))
 
 
 def point_array(values: Any, count: int, width: int) -> np.ndarray:
-    """A section's vector as a ``(count, width)`` float64 array (``width`` from :func:`vector_widths`)."""
+    """A section's vector as a ``(count, width)`` float64 array (``width``: its components' number)."""
     return np.asarray(values, dtype=np.float64).reshape(count, width)
 
 
+def component_name(names: Mapping[str, Sequence[str]] | None, vector: str, k: int) -> str:
+    """The name of component ``k`` (from 0) of ``vector``: its name in ``names`` (``x``, ``theta`` ...), else
+    the vector's name and the component's number from 1 (``M1``)."""
+    own = (names or {}).get(vector, ())
+    return own[k] if k < len(own) else f"{vector}{k + 1}"
+
+
 def columns(times: Mapping[str, Any], vectors: Mapping[str, Any], units: Mapping[str, str],
-            widths: Mapping[str, int] | None = None) -> list[Column]:
+            names: Mapping[str, Sequence[str]] | None = None) -> list[Column]:
     """(header ``name [unit]``, key, component or None) for t, τ (when ``times`` has one) and every
-    component of every vector (``M1``, ``M2`` ...: the vector's name and the component's number from 1);
-    a vector without rows has ``widths[name]`` components."""
+    component of every vector, named by ``names`` (:func:`component_name`: ``M1``, ``x``, ``theta_dot`` ...);
+    a vector without rows has ``len(names[vector])`` components."""
     cols: list[Column] = [(f"t [{units.get('t', 's')}]", "t", None)]
     if times.get("tau") is not None:
         cols.append((f"tau [{units.get('tau', '')}]", "tau", None))
     for name, values in vectors.items():
-        width = len(values[0]) if len(values) else (widths or {}).get(name, 3)
-        cols += [(f"{name}{k + 1} [{units.get(name, '')}]", name, k) for k in range(width)]
+        width = len(values[0]) if len(values) else len((names or {}).get(name, ())) or 3
+        cols += [(f"{component_name(names, name, k)} [{units.get(name, '')}]", name, k) for k in range(width)]
     return cols
 
 
 def trajectory_columns(result: dict[str, Any]) -> list[Column]:
     """(header ``name [unit]``, trajectory key, component or None) for t, τ and every vector's components."""
     trajectory = result["trajectory"]
-    return columns(trajectory, {name: trajectory[name] for name in _vectors(trajectory)}, result["system"]["units"])
+    return columns(trajectory, {name: trajectory[name] for name in _vectors(trajectory)}, result["system"]["units"],
+                   result["system"].get("components"))
 
 
 def section_columns(section: dict[str, Any], units: Mapping[str, str],
-                    widths: Mapping[str, int] | None = None) -> list[Column]:
+                    names: Mapping[str, Sequence[str]] | None = None) -> list[Column]:
     """The same for a section (``poincare`` block): t, τ, every point vector's components."""
-    return columns(section, section["points"], units, widths)
+    return columns(section, section["points"], units, names)
 
 
 def _csv_rows(cols: Sequence[Column], times: Mapping[str, Any], vectors: Mapping[str, Any], count: int,
@@ -106,10 +120,10 @@ def trajectory_csv(result: dict[str, Any]) -> Iterator[str]:
 
 
 def section_csv(section: dict[str, Any], units: Mapping[str, str],
-                widths: Mapping[str, int] | None = None) -> Iterator[str]:
+                names: Mapping[str, Sequence[str]] | None = None) -> Iterator[str]:
     """A job's crossings as CSV: one row per crossing, t, τ and every state and derived component, a
-    header naming each column and its unit (``widths``: :func:`vector_widths`, for a section without rows)."""
-    cols = section_columns(section, units, widths)
+    header naming each column (``names``: :func:`vector_components`) and its unit."""
+    cols = section_columns(section, units, names)
     return _streamed([c[0] for c in cols], _csv_rows(cols, section, section["points"], len(section["t"])))
 
 
@@ -122,30 +136,31 @@ def _npz(arrays: dict[str, np.ndarray], **texts: Any) -> bytes:
 
 def trajectory_npz(result: dict[str, Any], request: dict[str, Any]) -> bytes:
     """The samples as NPZ: ``t``, ``tau`` (when the system has one), each vector ``(n, 3)``, ``units_json``,
-    ``request_json`` and ``versions_json`` (0-d strings)."""
+    ``components_json`` (each vector's components by name), ``request_json`` and ``versions_json`` (0-d
+    strings)."""
     trajectory = result["trajectory"]
     arrays = {"t": np.asarray(trajectory["t"], dtype=float)}
     if trajectory.get("tau") is not None:
         arrays["tau"] = np.asarray(trajectory["tau"], dtype=float)
     arrays.update({name: np.asarray(trajectory[name], dtype=float) for name in _vectors(trajectory)})
-    return _npz(arrays, units=result["system"]["units"], request=request, versions=result["integration"]["versions"])
+    return _npz(arrays, units=result["system"]["units"], components=result_components(result, request), request=request,
+                versions=result["integration"]["versions"])
 
 
 def section_npz(result: dict[str, Any], request: dict[str, Any]) -> bytes:
     """A job's crossings as NPZ: ``t``, ``tau`` (when the system has one), each point vector ``(count, k)``,
-    ``coordinates`` ``(count, 2)``; ``units_json``, ``request_json``, ``versions_json`` and ``section_json``
-    (surface, value, direction, coordinate names, residual, drifts, warnings)."""
+    ``coordinates`` ``(count, 2)``; ``units_json``, ``components_json``, ``request_json``, ``versions_json`` and
+    ``section_json`` (surface, value, direction, coordinate names, residual, drifts, warnings)."""
     section = result["poincare"]
     count = len(section["t"])
     arrays = {"t": np.asarray(section["t"], dtype=float)}
     if section.get("tau") is not None:
         arrays["tau"] = np.asarray(section["tau"], dtype=float)
-    widths = {name: len(values[0]) for name, values in section["points"].items() if count} or \
-        vector_widths(request["system"])
-    arrays.update({name: point_array(values, count, widths[name]) for name, values in section["points"].items()})
+    names = result_components(result, request)
+    arrays.update({name: point_array(values, count, len(names[name])) for name, values in section["points"].items()})
     arrays["coordinates"] = np.asarray(section["coordinates"], dtype=float).reshape(count, 2)
-    return _npz(arrays, units=result["system"]["units"], request=request, versions=result["integration"]["versions"],
-                section=section_facts(section))
+    return _npz(arrays, units=result["system"]["units"], components=names, request=request,
+                versions=result["integration"]["versions"], section=section_facts(section))
 
 
 def section_facts(section: Mapping[str, Any]) -> dict[str, Any]:

@@ -18,12 +18,12 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from service.exports import point_array, section_facts, vector_widths
+from service.exports import component_name, point_array, result_components, section_facts, vector_components
 
 CONVENTIONS = "CF-1.10"
 REFERENCES = ('A. V. Borisov, I. S. Mamaev, "Hamiltonization of nonholonomic systems" (the equations, integrals, '
@@ -56,16 +56,17 @@ def _describe(system_json: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _variables(vectors: Mapping[str, Any], count: int, dim: str, units: Mapping[str, str],
-               labels: Mapping[str, Any], widths: Mapping[str, int] | None = None) -> dict[str, Any]:
-    """One ``(dim,)`` float64 variable per component: ``M1`` ... with units and long_name (``widths``:
-    the components of a vector without rows)."""
+               labels: Mapping[str, Any], names: Mapping[str, Sequence[str]]) -> dict[str, Any]:
+    """One ``(dim,)`` float64 variable per component, named by ``names`` (``M1`` ..., a user's ``x``, ``theta``
+    ...: :func:`service.exports.component_name`), with units, long_name, its vector and its number in it
+    (``names``: also the components of a vector without rows)."""
     out: dict[str, Any] = {}
     for name, values in vectors.items():
-        array = np.asarray(values, dtype=np.float64).reshape(count, -1 if count else (widths or {}).get(name, 3))
+        array = np.asarray(values, dtype=np.float64).reshape(count, -1 if count else len(names.get(name, ())) or 3)
         own = labels.get("components", {}).get(name, [])
         for k in range(array.shape[1]):
             called = f" {own[k]}" if k < len(own) else ""
-            out[f"{name}{k + 1}"] = (dim, np.ascontiguousarray(array[:, k]), {
+            out[component_name(names, name, k)] = (dim, np.ascontiguousarray(array[:, k]), {
                 "units": units.get(name, ""),
                 "long_name": f"{labels.get(name, name)}{called}: component {k + 1} of {name}",
                 "vector": name, "component": np.int32(k + 1)})
@@ -165,7 +166,7 @@ def trajectory_netcdf(job_id: str, created_at: str, result: Mapping[str, Any], r
     vectors = {k: v for k, v in trajectory.items() if k not in ("t", "tau")}
     attrs = _job_attrs(f"{result['system'].get('title', '')}: trajectory of job {job_id}", job_id, created_at,
                        result, request, f"GET /v1/jobs/{job_id}/trajectory?format=netcdf")
-    return _write(_variables(vectors, len(trajectory["t"]), "t", units, labels),
+    return _write(_variables(vectors, len(trajectory["t"]), "t", units, labels, result_components(result, request)),
                   _times(trajectory, "t", units, labels), attrs)
 
 
@@ -176,8 +177,8 @@ def section_netcdf(job_id: str, created_at: str, result: Mapping[str, Any], requ
     labels = _describe(request["system"])
     attrs = _job_attrs(f"{result['system'].get('title', '')}: Poincare section of job {job_id}", job_id, created_at,
                        result, request, f"GET /v1/jobs/{job_id}/section?format=netcdf")
-    widths = None if section["t"] else vector_widths(request["system"])
-    return _write(_variables(section["points"], len(section["t"]), "crossing", units, labels, widths),
+    names = result_components(result, request)
+    return _write(_variables(section["points"], len(section["t"]), "crossing", units, labels, names),
                   _times(section, "crossing", units, labels), {**attrs, **_section_attrs(section)})
 
 
@@ -191,7 +192,7 @@ def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary
     parts: dict[str, list[np.ndarray]] = {"member": [], "t": []}
     has_tau = True
     first: dict[str, Any] | None = None
-    widths = vector_widths(record["request"]["system"])
+    names = vector_components(record["request"]["system"])
     for index, section in members:
         count = len(section["t"])
         first = first or section
@@ -202,7 +203,7 @@ def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary
         else:
             parts.setdefault("tau", []).append(np.asarray(section["tau"], dtype=np.float64))
         for name, values in section["points"].items():
-            parts.setdefault(name, []).append(point_array(values, count, widths[name]))
+            parts.setdefault(name, []).append(point_array(values, count, len(names[name])))
     joined = {k: np.concatenate(v) if v else np.zeros(0) for k, v in parts.items()}
     request = record["request"]
     labels = _describe(request["system"])
@@ -225,4 +226,4 @@ def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary
         "members_with_crossings": np.int64(sum(1 for m in parts["member"] if len(m))),
         **({} if first is None else {k: v for k, v in _section_attrs(first).items() if k != "section"}),
     }
-    return _write(_variables(vectors, count, "crossing", units, labels, widths), coords, attrs)
+    return _write(_variables(vectors, count, "crossing", units, labels, names), coords, attrs)

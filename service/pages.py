@@ -4,6 +4,7 @@ internet; a page of something still running reloads itself every :data:`REFRESH_
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from functools import lru_cache
 from typing import Any
@@ -164,7 +165,13 @@ def written_system(request: Any) -> dict[str, Any] | None:
     except ValidationError:
         return None
     return {"components": spec.component_names(),
-            "expressions": [(field.removeprefix("system."), text) for field, text in spec.expressions()]}
+            "expressions": [(_entry_label(field.removeprefix("system.")), text) for field, text in spec.expressions()]}
+
+
+def _entry_label(field: str) -> str:
+    """A field as the page names it: ``constraints[0]`` → ``constraint 1`` (as the result names its integral)."""
+    match = re.fullmatch(r"(\w+?)s\[(\d+)\]", field)
+    return field if match is None else f"{match[1]} {int(match[2]) + 1}"
 
 
 def render_ensemble(view: dict[str, Any], members: Sequence[dict[str, Any]], units: dict[str, str]) -> str:

@@ -208,6 +208,13 @@ def _axis_label(name: str, units: Mapping[str, str]) -> str:
     return f"{_symbol(name)} [{unit}]" if unit is not None else _symbol(name)
 
 
+def _component_label(vector: StateVector, k: int, units: Mapping[str, str]) -> str:
+    """``γ₁ [1]``, ``θ [as L's coordinates]``: component ``k`` of a state vector by its own symbol (a user's
+    coordinate's name), with the vector's unit."""
+    unit = units.get(vector.name)
+    return f"{_symbol(str(vector.symbols[k]))} [{unit}]" if unit is not None else _symbol(str(vector.symbols[k]))
+
+
 def _headline(system: Mapping[str, Any], what: str) -> str:
     """``title (kind, eq. …)`` over ``what``: a plot's title."""
     kind = system.get("kind", "")
@@ -342,7 +349,7 @@ def _space_orbit(ax3: Any, g: np.ndarray, keep: np.ndarray, t: np.ndarray, geome
     for k, (axis, set_label) in enumerate(zip((ax3.xaxis, ax3.yaxis, ax3.zaxis),
                                                (ax3.set_xlabel, ax3.set_ylabel, ax3.set_zlabel))):
         axis.set_major_locator(MaxNLocator(5))
-        set_label(_axis_label(f"{geometric.name}{k + 1}", units))
+        set_label(_component_label(geometric, k, units))
     ax3.tick_params(labelsize=7)
     where = (f" on {constraint.formula.split(':')[0]} (eq. {constraint.equation})" if constraint else "")
     ax3.set_title(f"{_symbol(geometric.name)}{where}\n{geometric.meaning}")
@@ -378,7 +385,7 @@ def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | N
     if momentum is not None and momentum.name in orbit.vectors:
         m = orbit.vectors[momentum.name]
         for k in range(m.shape[1]):
-            ax.plot(t[keep], m[keep, k], linewidth=0.8, in_layout=False, label=_symbol(f"{momentum.name}{k + 1}"))
+            ax.plot(t[keep], m[keep, k], linewidth=0.8, in_layout=False, label=_symbol(str(momentum.symbols[k])))
         ax.set_ylabel(_axis_label(momentum.name, units))
         ax.set_title(f"{_symbol(momentum.name)}: {momentum.meaning}")
         ax.legend(loc="upper right")

@@ -456,7 +456,8 @@ class Client(SymbolicRoutes):
         attrs = frames.provenance(view)
         attrs.update(surface=str(section.get("surface")), value=str(section.get("value")),
                      direction=str(section.get("direction")))
-        return frames.section_frame([(None, section)], result["system"]["units"], attrs)
+        return frames.section_frame([(None, section)], result["system"]["units"], attrs,
+                                    result["system"].get("components"))
 
     def chaos_map(self, ensemble_id: str, format: Literal["xarray", "json", "csv", "netcdf"] = "xarray",  # noqa: A002
                   out: str | Path | None = None) -> xarray.Dataset | dict[str, Any] | bytes | Path:

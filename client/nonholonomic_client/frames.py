@@ -12,7 +12,7 @@ components ``M1 M2 M3 gamma1 ...``; units go to ``attrs["units"]`` (xarray: each
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -41,7 +41,20 @@ def _xarray() -> Any:
     return xarray
 
 
-def components(samples: Mapping[str, Any], skip: Iterable[str] = ("t", "tau", "units")) -> dict[str, np.ndarray]:
+def component_name(names: Mapping[str, Sequence[str]] | None, vector: str, k: int) -> str:
+    """The name of component ``k`` (from 0) of ``vector``: as the result names it (``system.components``: ``x``,
+    ``theta_dot`` ...), else the vector's name and the number from 1 (``M1``), as the service's exports do."""
+    own = (names or {}).get(vector, ())
+    return own[k] if k < len(own) else f"{vector}{k + 1}"
+
+
+def _vectors_of(names: Mapping[str, Sequence[str]] | None) -> dict[str, tuple[str, int]]:
+    """Each named component's (vector, number from 1)."""
+    return {c: (vector, k + 1) for vector, own in (names or {}).items() for k, c in enumerate(own)}
+
+
+def components(samples: Mapping[str, Any], skip: Iterable[str] = ("t", "tau", "units"),
+               names: Mapping[str, Sequence[str]] | None = None) -> dict[str, np.ndarray]:
     """Each vector of ``samples`` split into its components, in order: ``{"M1": ..., "gamma3": ...}``.
 
     Parameters
@@ -50,6 +63,9 @@ def components(samples: Mapping[str, Any], skip: Iterable[str] = ("t", "tau", "u
         ``{"M": [[M1, M2, M3], ...], "gamma": [...], ...}`` (a trajectory, or a section's ``points``).
     skip : iterable of str
         Keys that are not vectors.
+    names : mapping, optional
+        Each vector's components by name (a result's ``system.components``: a system's own coordinates
+        ``x``, ``theta`` ...); default ``M1`` ...
 
     Returns
     -------
@@ -66,16 +82,17 @@ def components(samples: Mapping[str, Any], skip: Iterable[str] = ("t", "tau", "u
                 continue
             array = array.reshape(len(array), -1)
         for k in range(array.shape[1]):
-            out[f"{name}{k + 1}"] = array[:, k]
+            out[component_name(names, name, k)] = array[:, k]
     return out
 
 
-def _unit_of(column: str, units: Mapping[str, str]) -> str:
-    """The unit of ``t``, ``tau`` or a component: its vector's (``M2`` → ``units["M"]``), never a
-    parameter's of the same name."""
+def _unit_of(column: str, units: Mapping[str, str], names: Mapping[str, Sequence[str]] | None = None) -> str:
+    """The unit of ``t``, ``tau`` or a component: its vector's (``M2`` → ``units["M"]``, ``theta`` →
+    ``units["q"]`` by ``names``), never a parameter's of the same name."""
     if column in ("t", "tau"):
         return units.get(column, "")
-    return units.get(column.rstrip("0123456789"), "")
+    vector = _vectors_of(names).get(column, (column.rstrip("0123456789"), 0))[0]
+    return units.get(vector, "")
 
 
 def evidence(result: Mapping[str, Any]) -> dict[str, Any]:
@@ -121,13 +138,16 @@ def provenance(view: Mapping[str, Any]) -> dict[str, str]:
             "source": "nonholonomic (Borisov & Mamaev, 'Hamiltonization of nonholonomic systems')"}
 
 
-def trajectory_columns(trajectory: Mapping[str, Any]) -> dict[str, np.ndarray]:
+def trajectory_columns(trajectory: Mapping[str, Any],
+                       names: Mapping[str, Sequence[str]] | None = None) -> dict[str, np.ndarray]:
     """``t``, ``tau`` (when there is one) and every component of a trajectory's JSON, as arrays.
 
     Parameters
     ----------
     trajectory : mapping
         ``GET /v1/jobs/{id}/trajectory`` (format json).
+    names : mapping, optional
+        The components' names (:func:`components`).
 
     Returns
     -------
@@ -136,7 +156,7 @@ def trajectory_columns(trajectory: Mapping[str, Any]) -> dict[str, np.ndarray]:
     columns = {"t": np.asarray(trajectory["t"], dtype=np.float64)}
     if trajectory.get("tau") is not None:
         columns["tau"] = np.asarray(trajectory["tau"], dtype=np.float64)
-    return {**columns, **components(trajectory)}
+    return {**columns, **components(trajectory, names=names)}
 
 
 def trajectory_dataset(trajectory: Mapping[str, Any], view: Mapping[str, Any]) -> xarray.Dataset:
@@ -157,18 +177,28 @@ def trajectory_dataset(trajectory: Mapping[str, Any], view: Mapping[str, Any]) -
     """
     xr = _xarray()
     units = trajectory.get("units", {})
-    columns = trajectory_columns(trajectory)
+    names = result_components(view)
+    columns = trajectory_columns(trajectory, names)
     t = columns.pop("t")
-    data = {name: ("t", values, {"units": _unit_of(name, units), "long_name": _long_name(name, view)})
+    data = {name: ("t", values, {"units": _unit_of(name, units, names), "long_name": _long_name(name, view, names)})
             for name, values in columns.items()}
     coords = {"t": ("t", t, {"units": units.get("t", "s"), "long_name": "physical time t"})}
     return xr.Dataset(data, coords=coords, attrs=provenance(view))
 
 
-def _long_name(column: str, view: Mapping[str, Any]) -> str:
+def result_components(view: Mapping[str, Any]) -> dict[str, list[str]] | None:
+    """The components' names of a job's result (``result.system.components``), or None (a result without them:
+    ``M1`` ...)."""
+    return ((view.get("result") or {}).get("system") or {}).get("components")
+
+
+def _long_name(column: str, view: Mapping[str, Any], names: Mapping[str, Sequence[str]] | None = None) -> str:
     if column == "tau":
         time = ((view.get("result") or {}).get("time") or {})
         return str(time.get("tau") or "reduced time tau")
+    named = _vectors_of(names).get(column)
+    if named is not None:
+        return f"{column}: component {named[1]} of {named[0]}"
     vector = column.rstrip("0123456789")
     return f"{vector} component {column[len(vector):]}"
 
@@ -187,14 +217,14 @@ def trajectory_frame(trajectory: Mapping[str, Any], view: Mapping[str, Any]) -> 
         Columns ``tau``, ``M1`` ...; ``attrs`` holds ``units`` and the provenance.
     """
     pd = _pandas()
-    columns = trajectory_columns(trajectory)
+    columns = trajectory_columns(trajectory, result_components(view))
     frame = pd.DataFrame(columns).set_index("t")
     frame.attrs = {"units": dict(trajectory.get("units", {})), **provenance(view)}
     return frame
 
 
 def section_frame(sections: Iterable[tuple[int | None, Mapping[str, Any]]], units: Mapping[str, str],
-                  attrs: Mapping[str, Any]) -> pandas.DataFrame:
+                  attrs: Mapping[str, Any], names: Mapping[str, Sequence[str]] | None = None) -> pandas.DataFrame:
     """Poincaré crossings as a table: one row per crossing, ``member`` (ensembles), ``t``, ``tau`` and
     every component of the state at the crossing.
 
@@ -206,6 +236,8 @@ def section_frame(sections: Iterable[tuple[int | None, Mapping[str, Any]]], unit
         The system's units (``t``, ``tau``, ``M``, ...).
     attrs : mapping
         Stored in ``frame.attrs`` with the units.
+    names : mapping, optional
+        The components' names (:func:`components`).
 
     Returns
     -------
@@ -221,7 +253,7 @@ def section_frame(sections: Iterable[tuple[int | None, Mapping[str, Any]]], unit
         columns["t"] = t
         if section.get("tau") is not None:
             columns["tau"] = np.asarray(section["tau"], dtype=np.float64)
-        columns.update(components(section.get("points") or {}))
+        columns.update(components(section.get("points") or {}, names=names))
         frames.append(pd.DataFrame(columns))
     frame = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame({"t": np.zeros(0)})
     frame.index.name = "crossing"
@@ -244,11 +276,12 @@ def section_npz_frame(arrays: Mapping[str, np.ndarray], attrs: Mapping[str, Any]
     pandas.DataFrame
     """
     units = json.loads(str(arrays["units_json"])) if "units_json" in arrays else {}
+    names = json.loads(str(arrays["components_json"])) if "components_json" in arrays else None
     request = str(arrays["request_json"]) if "request_json" in arrays else ""
     section = {"t": arrays.get("t", np.zeros(0)), "tau": arrays.get("tau"),
                "points": {k: v for k, v in arrays.items()
-                          if k not in ("member", "t", "tau", "request_json", "units_json")}}
-    frame = section_frame([(None, section)], units, {**attrs, "request": request})
+                          if k not in ("member", "t", "tau") and not k.endswith("_json")}}
+    frame = section_frame([(None, section)], units, {**attrs, "request": request}, names)
     if "member" in arrays:
         frame.insert(0, "member", np.asarray(arrays["member"], dtype=np.int64))
     return frame

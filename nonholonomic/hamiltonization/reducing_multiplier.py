@@ -156,8 +156,9 @@ class _Sampler:
     def note(self) -> str:
         if not self.drawn:
             return ""
-        return "; parameters without a value drawn at random: " + ", ".join(
-            f"{s}={v:.4f}" for s, v in sorted(self.drawn.items(), key=lambda kv: str(kv[0])))
+        return ("; the numeric checks evaluate the constants at values drawn at random (the symbolic work keeps "
+                "them as symbols): " + ", ".join(
+            f"{s}={v:.4f}" for s, v in sorted(self.drawn.items(), key=lambda kv: str(kv[0]))))
 
     def coordinates(self, n: int) -> np.ndarray:
         return self.rng.uniform(0.2, 1.35, (n, 2))

@@ -31,11 +31,11 @@ from service.exports import (
     download,
     download_responses,
     json_download,
+    result_components,
     section_csv,
     section_npz,
     trajectory_csv,
     trajectory_npz,
-    vector_widths,
 )
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
@@ -159,8 +159,8 @@ def get_section(job_id: str, request: Request, backend: Backend, owner: Owner,
     filename = f"job-{job_id}-section.{SUFFIXES[format]}"
     units = result["system"]["units"]
     if format == "csv":
-        widths = None if result["poincare"]["t"] else vector_widths(record.request["system"])
-        return download(request, section_csv(result["poincare"], units, widths), MEDIA_TYPES[format], filename)
+        names = result_components(result, record.request)
+        return download(request, section_csv(result["poincare"], units, names), MEDIA_TYPES[format], filename)
     if format == "npz":
         return download(request, section_npz(result, record.request), MEDIA_TYPES[format], filename)
     if format == "netcdf":

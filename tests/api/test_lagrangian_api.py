@@ -6,6 +6,8 @@ LagrangesMethod), their integrals, the catalog entry, the measure verdict, the p
 from __future__ import annotations
 
 import copy
+import io
+import json
 
 import numpy as np
 import pytest
@@ -61,12 +63,27 @@ def test_the_sleigh_agrees_with_its_reduced_closed_form(client):
 
     page = client.get(f"{location}/page")
     assert page.status_code == 200 and "lagrangian" in page.text and "not checked" in page.text
+    assert "<dt>q</dt><dd><code>x, y, theta</code></dd>" in page.text
+    assert "<dt>constraint 1</dt><dd><code>-sin(theta)*x_dot + cos(theta)*y_dot = 0</code></dd>" in page.text
     for name in ("trajectory", "integrals"):
         plot = client.get(f"{location}/plots/{name}.png")
         assert plot.status_code == 200 and plot.headers["content-type"] == "image/png", plot.text
     for fmt, magic in (("csv", b"t ["), ("npz", b"PK"), ("netcdf", b"\x89HDF")):
         export = client.get(f"{location}/trajectory", params={"format": fmt})
         assert export.status_code == 200 and export.content.startswith(magic), (fmt, export.text[:300])
+    # the exports name the components as the user did (issue 33, item 5), the numbers those of the JSON
+    own = ["x", "y", "theta", "x_dot", "y_dot", "theta_dot"]
+    assert result["system"]["components"] == {"q": own[:3], "q_dot": own[3:]}
+    header = client.get(f"{location}/trajectory", params={"format": "csv"}).text.splitlines()[0]
+    assert [c.split(" [")[0] for c in header.split(",")] == ["t", *own]
+    with np.load(io.BytesIO(client.get(f"{location}/trajectory", params={"format": "npz"}).content)) as arrays:
+        assert json.loads(str(arrays["components_json"])) == result["system"]["components"]
+    import xarray as xr
+
+    ds = xr.open_dataset(client.get(f"{location}/trajectory", params={"format": "netcdf"}).content,
+                         engine="netcdf4").load()
+    assert set(ds.data_vars) == set(own) and ds["theta_dot"].attrs["vector"] == "q_dot"
+    assert np.array_equal(ds["theta"].values, np.asarray(result["trajectory"]["q"])[:, 2])
 
 
 def _lagranges_method_reference(t_final: float) -> np.ndarray:

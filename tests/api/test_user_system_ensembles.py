@@ -4,6 +4,8 @@ in heyoka's batch mode like a catalog kind's, and equals the single job of the s
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE_JOB as VESELOVA_JOB
@@ -87,7 +89,8 @@ def test_wrong_widths_and_unsampled_levels_are_named(client):
 def test_sections_keep_each_vectors_own_width_with_rows_and_without(client):
     """A generalized Chaplygin system's q has 2 components: its ensemble's NPZ and NetCDF hold (count, 2)
     arrays equal to the members' JSON (before, the NPZ was reshaped to (−1, 3)); a section without a
-    crossing keeps the widths too (no phantom q3)."""
+    crossing keeps the widths too (no phantom third component). The columns and variables are named by the
+    system's own coordinates and velocities (issue 33, item 5)."""
     import io
 
     import xarray as xr
@@ -102,16 +105,27 @@ def test_sections_keep_each_vectors_own_width_with_rows_and_without(client):
         assert arrays["q"].shape == (len(expected), 2) and np.array_equal(arrays["q"], expected)
     stored = xr.open_dataset(client.get(f"/v1/ensembles/{view['id']}/poincare", params={"format": "netcdf"}).content,
                              engine="netcdf4").load()
-    assert "q3" not in stored and np.array_equal(stored["q2"].values, expected[:, 1])
+    own = VESELOVA_JOB["system"]["coordinates"] + VESELOVA_JOB["system"]["velocities"]
+    assert set(stored.data_vars) == set(own) and np.array_equal(stored[own[1]].values, expected[:, 1])
+    assert stored[own[1]].attrs["vector"] == "q" and stored[own[1]].attrs["component"] == 2
+    assert json.loads(str(arrays_components(raw)))["q"] == VESELOVA_JOB["system"]["coordinates"]
     r = client.post("/v1/jobs", json={**SLEIGH_JOB, "poincare": {"surface": "theta", "value": 100.0}})
     job = poll_job(client, r.headers["location"], timeout=120.0)
     assert job["status"] == "succeeded" and job["result"]["poincare"]["count"] == 0
     header = client.get(f"{r.headers['location']}/section", params={"format": "csv"}).text.splitlines()[0]
-    assert [c.split(" [")[0] for c in header.split(",")] == ["t", "q1", "q2", "q3", "q_dot1", "q_dot2", "q_dot3"]
+    assert [c.split(" [")[0] for c in header.split(",")] == ["t", "x", "y", "theta", "x_dot", "y_dot", "theta_dot"]
     with np.load(io.BytesIO(client.get(f"{r.headers['location']}/section", params={"format": "npz"}).content)) as a:
         assert a["q"].shape == (0, 3) and a["q_dot"].shape == (0, 3)
     r = client.post("/v1/jobs", json={**VESELOVA_JOB, "poincare": {"surface": "theta", "value": 100.0}})
     assert poll_job(client, r.headers["location"], timeout=120.0)["status"] == "succeeded"
     empty = xr.open_dataset(client.get(f"{r.headers['location']}/section", params={"format": "netcdf"}).content,
                             engine="netcdf4").load()
-    assert {"q1", "q2", "q_dot1", "q_dot2"} <= set(empty.data_vars) and "q3" not in empty
+    assert set(empty.data_vars) == set(own)
+
+
+def arrays_components(raw: bytes) -> str:
+    """The ``components_json`` of an NPZ download."""
+    import io
+
+    with np.load(io.BytesIO(raw)) as arrays:
+        return str(arrays["components_json"])

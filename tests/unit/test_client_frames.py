@@ -47,6 +47,24 @@ def test_a_parameter_named_like_a_component_does_not_lend_its_unit():
     assert ds["q1"].attrs["units"] == "rad" and ds["q2"].attrs["units"] == "rad"
 
 
+def test_a_systems_own_coordinates_name_its_columns():
+    """A result naming its components (``system.components``: a Lagrangian system's x, theta, x_dot ...) names the
+    dataset's variables, the frame's columns and a section NPZ's columns; units and long names follow the vector."""
+    names = {"q": ["x", "theta"], "q_dot": ["x_dot", "theta_dot"]}
+    trajectory = {"units": {"t": "s", "q": "m", "q_dot": "m/s", "x": "kg"}, "t": [0.0, 1.0],
+                  "q": [[0.1, 0.2], [0.3, 0.4]], "q_dot": [[1.0, 2.0], [3.0, 4.0]]}
+    view = {"id": "j", "request": {}, "result": {"system": {"components": names}}}
+    ds = frames.trajectory_dataset(trajectory, view)
+    assert set(ds.data_vars) == {"x", "theta", "x_dot", "theta_dot"}
+    assert ds["x"].attrs["units"] == "m" and ds["theta_dot"].attrs["units"] == "m/s"  # the vector's, not x's
+    assert ds["theta_dot"].attrs["long_name"] == "theta_dot: component 2 of q_dot"
+    np.testing.assert_array_equal(ds["theta"].values, [0.2, 0.4])
+    assert list(frames.trajectory_frame(trajectory, view).columns) == ["x", "theta", "x_dot", "theta_dot"]
+    npz = {"t": np.array([0.5]), "q": np.array([[0.1, 0.2]]), "q_dot": np.array([[1.0, 2.0]]),
+           "units_json": np.array(json.dumps(trajectory["units"])), "components_json": np.array(json.dumps(names))}
+    assert list(frames.section_npz_frame(npz, {}).columns) == ["t", "x", "theta", "x_dot", "theta_dot"]
+
+
 def _ensemble_server(total: int, undone: range, page_limit: int = 1000) -> httpx.MockTransport:
     """The members route as the service answers it: indices offset .. offset + limit - 1 of finished chunks."""
     def handler(request: httpx.Request) -> httpx.Response:
