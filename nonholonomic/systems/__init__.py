@@ -3,7 +3,7 @@
 
 Adding a kind is one new module plus its tests (``docs/layout.md``, "Adding a system kind"): a module of
 this package named in :data:`BUILT_IN`, or a module of another distribution declared under the entry-point
-group ``nonholonomic.kinds`` (:data:`nonholonomic.kinds.ENTRY_POINT_GROUP`), loaded when this package is.
+group ``nonholonomic.kinds`` (:data:`nonholonomic.kinds.ENTRY_POINT_GROUP`), loaded with the built-in ones.
 A catalog kind's module declares ``KIND``, ``TITLE``, ``PARAMETERS``, ``STATE``, ``POTENTIALS``,
 ``POTENTIAL_VARIABLES``, ``EXAMPLE`` and ``define(potential) -> MechanicalSystem`` (``define(potential,
 surface)`` for a kind with ``surface=True``); ``SYSTEMS`` maps those kinds to their modules,
