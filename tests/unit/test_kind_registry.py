@@ -59,9 +59,11 @@ FIRST = ["nonholonomic.hamiltonization.local_forms", "nonholonomic.hamiltonizati
 
 
 def test_the_registry_loads_whatever_module_is_imported_first():
-    """A fresh interpreter per module (forked from a bare one): import it, then read the registry."""
+    """A fresh interpreter per module (forked from one that imported only the third-party libraries): import it,
+    then read the registry."""
     script = f"""
 import os, sys
+import numpy, scipy.integrate, sympy  # shared by the forks: each child imports only the project's modules
 bad = []
 for name in {FIRST!r}:
     pid = os.fork()
