@@ -79,11 +79,12 @@ def columns(times: Mapping[str, Any], vectors: Mapping[str, Any], units: Mapping
     return cols
 
 
-def trajectory_columns(result: dict[str, Any]) -> list[Column]:
-    """(header ``name [unit]``, trajectory key, component or None) for t, τ and every vector's components."""
+def trajectory_columns(result: dict[str, Any], names: Mapping[str, Sequence[str]]) -> list[Column]:
+    """(header ``name [unit]``, trajectory key, component or None) for t, τ and every vector's components
+    (``names``: :func:`result_components`)."""
     trajectory = result["trajectory"]
     return columns(trajectory, {name: trajectory[name] for name in _vectors(trajectory)}, result["system"]["units"],
-                   result["system"].get("components"))
+                   names)
 
 
 def section_columns(section: dict[str, Any], units: Mapping[str, str],
@@ -112,9 +113,10 @@ def _streamed(header: Sequence[str], rows: Iterable[list[Any]]) -> Iterator[str]
     yield buffer.getvalue()
 
 
-def trajectory_csv(result: dict[str, Any]) -> Iterator[str]:
-    """The samples as CSV, a piece of :data:`ROWS_PER_PIECE` rows at a time (floats in full precision)."""
-    cols = trajectory_columns(result)
+def trajectory_csv(result: dict[str, Any], names: Mapping[str, Sequence[str]]) -> Iterator[str]:
+    """The samples as CSV, a piece of :data:`ROWS_PER_PIECE` rows at a time (floats in full precision), the
+    columns named by ``names`` (:func:`result_components`)."""
+    cols = trajectory_columns(result, names)
     trajectory = result["trajectory"]
     return _streamed([c[0] for c in cols], _csv_rows(cols, trajectory, trajectory, len(trajectory["t"])))
 

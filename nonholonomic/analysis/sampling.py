@@ -281,16 +281,11 @@ def no_plan(system: MechanicalSystem) -> str:
     return f"no states drawn on a level set ({why}): give the members' initial states or a sweep"
 
 
-def _needed_plan(system: MechanicalSystem) -> Sampling:
+def _checked_plan(system: MechanicalSystem) -> Sampling:
+    """The plan of a system :func:`_check_request` accepted (it refuses a kind without one)."""
     plan = plan_of(system)
-    if plan is None:
-        raise LevelError("level", f"{system.kind}: {no_plan(system)}")
+    assert plan is not None
     return plan
-
-
-def _velocity(system: MechanicalSystem) -> str:
-    """The state vector solved for on the energy level."""
-    return _needed_plan(system).velocity
 
 
 def _check_request(system: MechanicalSystem, parameters: np.ndarray, level: Mapping[str, float],
@@ -341,7 +336,7 @@ def _solve_energy(ctx: _Context, draw: _Draw, h: float,
     extremum : ``e₀ − e₁²/(4 e₂)``, the least (e₂ > 0) or greatest (e₂ < 0) energy on each line.
     curvature : e₂.
     """
-    slot = ctx.slot(_velocity(ctx.system))
+    slot = ctx.slot(_checked_plan(ctx.system).velocity)
     states, base, u = draw.states, draw.base, draw.direction
 
     def energy(v: np.ndarray) -> np.ndarray:
@@ -460,7 +455,7 @@ def on_level(system: MechanicalSystem, parameters: np.ndarray, level: Mapping[st
     """
     values = _check_request(system, parameters, level, count, seed)
     ctx = _Context(system, np.asarray(parameters, dtype=float), values)
-    draw_batch = _drawer(_needed_plan(system))
+    draw_batch = _drawer(_checked_plan(system))
     rng = np.random.default_rng(seed)
     budget = max(TRIES_PER_STATE * count, BATCH)
     accepted: list[np.ndarray] = []

@@ -125,7 +125,8 @@ def get_trajectory(job_id: str, request: Request, backend: Backend, owner: Owner
     assert result is not None
     filename = f"job-{job_id}-trajectory.{SUFFIXES[format]}"  # the id as a safe name
     if format == "csv":
-        return download(request, trajectory_csv(result), MEDIA_TYPES[format], filename)
+        return download(request, trajectory_csv(result, result_components(result, record.request)),
+                        MEDIA_TYPES[format], filename)
     if format == "npz":
         return download(request, trajectory_npz(result, record.request), MEDIA_TYPES[format], filename)
     if format == "netcdf":

@@ -43,7 +43,8 @@ def get_system(kind: str) -> dict[str, Any]:
     ``CatalogGeneralizedChaplygin`` and a ``CatalogLagrangian``."""
     if kind in SYSTEMS:
         return _linked(describe(kind))
-    if kind in KINDS:
-        return catalog()[kind]
+    entry = KINDS[kind].catalog_entry if kind in KINDS else None
+    if entry is not None:  # a kind written by the user: its own entry, not the whole catalog built for it
+        return entry()
     raise ProblemError(404, "Unknown system kind",
                        f"no system kind {kind!r}{did_you_mean(kind, list(KINDS))}; known: {sorted(KINDS)}", NOT_FOUND)
