@@ -260,12 +260,20 @@ class InvariantMeasure:
 
 @dataclass(frozen=True)
 class ReducedTime:
-    """The time substitution ``dτ = density · dt`` of the paper's Hamiltonization."""
+    """The time substitution ``dτ = density · dt`` of the paper's Hamiltonization.
+
+    ``regular``: the density is analytic and positive wherever the state is admissible (the paper's kinds:
+    their parameters' bounds make it so), and τ' = N is integrated beside the state. Otherwise (a reducing
+    multiplier Theorem 1 found for a user's system, such as √(1 − sin θ)·√(1 + sin θ) = |cos θ|) τ is
+    integrated by quadrature along the dense output, where N's zeros, sign changes and kinks are located
+    (:mod:`nonholonomic.numerics.reduced_time`).
+    """
 
     density: sp.Expr
     formula: str
     equation: str
     unit: str
+    regular: bool = True
 
 
 @dataclass(frozen=True)
@@ -303,6 +311,13 @@ class MechanicalSystem:
     def state_symbols(self) -> tuple[sp.Symbol, ...]:
         """All state symbols, flattened in the order of ``state``."""
         return tuple(s for v in self.state for s in v.symbols)
+
+    @property
+    def taylor_time_density(self) -> sp.Expr | None:
+        """N when τ' = N is integrated beside the state by the Taylor integrator (a regular reduced time),
+        else None (no reduced time, or τ by quadrature)."""
+        reduced = self.reduced_time
+        return reduced.density if reduced is not None and reduced.regular else None
 
     @property
     def parameter_symbols(self) -> tuple[sp.Symbol, ...]:

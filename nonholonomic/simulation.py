@@ -12,6 +12,7 @@ from nonholonomic.analysis.options import PeriodicOrbitOptions, SectionOptions, 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.integrals import IntegralEvidence, integral_evidence
 from nonholonomic.evidence.measure import CheckEvidence, measure_evidence
+from nonholonomic.evidence.time_change import time_change_evidence
 from nonholonomic.hamiltonization.structure import bracket_evidence, euler_angle_evidence, structural_checks
 from nonholonomic.initial_state import (
     ProjectionReport,
@@ -155,5 +156,7 @@ def simulate(
         orbit, branch = periodic_orbit.run(system, p, y0, t_final, tolerance=tolerance,
                                            progress=phase(progress, done / parts, 1.0))
     derived, integrals, found = evidence(system, p, trajectory, checks)
-    return SimulationResult(system, p, trajectory, derived, integrals, found,
-                            parameter_warnings(system, parameters), projections, section, spectrum, orbit, branch)
+    time_checks, time_warnings = time_change_evidence(system, trajectory)
+    return SimulationResult(system, p, trajectory, derived, integrals, found + time_checks,
+                            parameter_warnings(system, parameters) + time_warnings, projections, section, spectrum,
+                            orbit, branch)

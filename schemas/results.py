@@ -12,6 +12,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from nonholonomic.analysis.ensemble import MemberResult
 from nonholonomic.definition import MechanicalSystem
+from nonholonomic.evidence.time_change import domain_json
 from nonholonomic.simulation import SimulationResult
 from schemas.analysis import SectionResult, SpectrumResult, section_to_json, spectrum_to_json
 from schemas.periodic_orbits import PeriodicOrbitResult, branch_to_json, orbit_to_json
@@ -57,10 +58,24 @@ class IntegrationInfo(BaseModel):
         None, description="the service that computed it: name, version, and the git commit when there is one")
 
 
+class TauDomain(BaseModel):
+    method: str = Field(description="how tau was integrated (by quadrature along the dense output)")
+    zeros: list[float] = Field(description="the first 50 times where N vanishes without changing sign")
+    zero_count: int
+    sign_changes: list[float] = Field(description="the first 50 times where N changes sign")
+    sign_change_count: int
+    not_real_from: float | None = Field(description="the time from which N is not real (tau is null after it)")
+    nonzero_until: float | None = Field(description="the first time N vanishes, changes sign or stops being real: "
+                                                    "the time change is a Hamiltonization on [0, nonzero_until)")
+
+
 class TimeInfo(BaseModel):
     t: str = "physical time t [s]"
     tau: str | None = Field(description="reduced time of the Hamiltonization, with its formula and equation "
                                         "(null for systems without one)")
+    tau_domain: TauDomain | None = Field(None, description="where N vanishes, changes sign or is not real, when "
+                                                           "N is not known to be analytic and positive (tau is "
+                                                           "then integrated by quadrature, cut at N's kinks)")
 
 
 class SystemInfo(BaseModel):
@@ -85,7 +100,8 @@ class Trajectory(BaseModel):
 
     model_config = ConfigDict(extra="allow")
     t: list[float]
-    tau: list[float] | None
+    tau: list[float | None] | None = Field(description="tau at each sample; null where N is not real (see "
+                                                       "time.tau_domain)")
 
 
 class ProjectionItem(BaseModel):
@@ -203,11 +219,13 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
         "projections": [asdict(p) for p in result.projections],
         "final_state": {name: values[-1] for name, values in samples.items()},
         "t_final": float(traj.t[-1]),
-        "tau_final": None if traj.tau is None else float(traj.tau[-1]),
+        "tau_final": None if traj.tau is None or not np.isfinite(traj.tau[-1]) else float(traj.tau[-1]),
         "time": {"t": "physical time t [s]",
                  "tau": None if reduced is None else
-                 f"reduced time, {reduced.formula} (eq. {reduced.equation}), tau(0) = 0"},
-        "trajectory": {"t": traj.t.tolist(), "tau": None if traj.tau is None else traj.tau.tolist(), **samples},
+                 f"reduced time, {reduced.formula} (eq. {reduced.equation}), tau(0) = 0",
+                 "tau_domain": domain_json(traj.reduced_time)},
+        "trajectory": {"t": traj.t.tolist(), "tau": None if traj.tau is None else _finite_or_null(traj.tau),
+                       **samples},
         "integrals": [asdict(i) for i in result.integrals],
         "checks": [asdict(c) for c in result.checks],
         "integration": {"engine": traj.engine, "tolerance": traj.tolerance, "steps": traj.steps,
@@ -217,6 +235,12 @@ def result_to_json(result: SimulationResult, parameters: dict[str, Any]) -> dict
         "lyapunov": None if result.lyapunov is None else spectrum_to_json(result.lyapunov),
         "periodic_orbit": _periodic_orbit(result),
     }
+
+
+def _finite_or_null(values: np.ndarray) -> list[float | None]:
+    """``values`` as a list, NaN (τ where N is not real) as None."""
+    return [float(v) if np.isfinite(v) else None for v in values] if not np.all(np.isfinite(values)) \
+        else values.tolist()
 
 
 def _periodic_orbit(result: SimulationResult) -> dict[str, Any] | None:

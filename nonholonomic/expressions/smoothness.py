@@ -61,3 +61,42 @@ def integrable(expr: sp.Expr) -> sp.Expr:
                                   "x**y)")
     return expr.replace(sp.cot, lambda x: sp.cos(x) / sp.sin(x)).replace(
         sp.sec, lambda x: 1 / sp.cos(x)).replace(sp.csc, lambda x: 1 / sp.sin(x))
+
+
+#: Functions that are not analytic where their argument is 0 (or at all).
+_KINKS = (sp.Abs, sp.sign, sp.Piecewise, sp.Heaviside, sp.Min, sp.Max, sp.floor, sp.ceiling)
+
+
+def analytic_and_positive(expr: sp.Expr) -> bool:
+    """Whether sympy proves ``expr`` analytic and positive for every real value of its symbols.
+
+    No ``abs``, ``sign``, ``Piecewise`` ..., every power with a non-integer exponent (and every ``log``) of an
+    argument sympy proves positive, and ``expr`` itself proven positive. False means "not proven": e.g.
+    √(1 − sin θ)·√(1 + sin θ) (= |cos θ|, a kink at each zero), sin ψ sin θ (a sign change), √(J + m a²) with
+    m of either sign.
+    """
+    real = expr.xreplace({s: sp.Dummy(s.name, real=True) for s in expr.free_symbols})
+    if real.has(*_KINKS):
+        return False
+    if any(not p.exp.is_integer and p.base.is_positive is not True for p in real.atoms(sp.Pow)):
+        return False
+    if any(a.args[0].is_positive is not True for a in real.atoms(sp.log)):
+        return False
+    return real.is_positive is True
+
+
+def kink_arguments(expr: sp.Expr) -> list[sp.Expr]:
+    """The expressions at whose zeros ``expr`` may fail to be analytic: the arguments of ``abs``, ``sign`` and
+    ``Heaviside``, the bases of powers with a non-integer exponent and the arguments of ``log``, the two sides'
+    difference of each condition of a ``Piecewise`` and the pairwise differences of ``Min``/``Max``."""
+    found: list[sp.Expr] = []
+    for node in sp.preorder_traversal(expr):
+        if isinstance(node, (sp.Abs, sp.sign, sp.Heaviside, sp.log)):
+            found.append(node.args[0])
+        elif isinstance(node, sp.Pow) and not node.exp.is_integer:
+            found.append(node.base)
+        elif isinstance(node, sp.Piecewise):
+            found += [c.lhs - c.rhs for _, c in node.args if isinstance(c, sp.core.relational.Relational)]
+        elif isinstance(node, (sp.Min, sp.Max)):
+            found += [x - y for i, x in enumerate(node.args) for y in node.args[i + 1:]]
+    return list(dict.fromkeys(e for e in found if not e.is_number))

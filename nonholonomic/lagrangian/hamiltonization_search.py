@@ -25,6 +25,7 @@ import sympy as sp
 
 from nonholonomic import bounded
 from nonholonomic.definition import ReducedTime
+from nonholonomic.expressions.smoothness import analytic_and_positive
 from nonholonomic.lagrangian.chaplygin import ChaplyginReduction, chaplygin_reduction
 from nonholonomic.lagrangian.equations import derive, tidy
 from nonholonomic.lagrangian.parse import KIND, LagrangianData
@@ -51,11 +52,17 @@ class Hamiltonization:
         JSON: ``verdict`` (``found``, ``none`` when Theorem 1 gives no multiplier, ``not applicable`` when
         the system is not a Chaplygin system with 2 shape coordinates, ``undecided``), ``reason`` and, when
         reduced, the reduced system (2704-7) and N.
+    shape : tuple of int
+        The shape coordinates' indices, when found.
+    L_star : sympy.Expr or None
+        The reduced Lagrangian's velocity terms (the kinetic matrix M* = ∂²L*/∂q̇²), when found.
     """
 
     form: Any
     reduced_time: ReducedTime | None
     summary: dict[str, Any]
+    shape: tuple[int, ...] = ()
+    L_star: sp.Expr | None = None
 
 
 def _reduced_text(reduction: ChaplyginReduction) -> dict[str, Any]:
@@ -127,10 +134,12 @@ def _hamiltonization(data: LagrangianData) -> Hamiltonization:
             f"constraint manifold: {how}")})
     form, why = theorem_1(reduction.data)
     at_values = ""
+    L_star = reduction.data.L
     if form is None and data.parameters:
         exact = chaplygin_reduction(data, at_values=True)
         if exact.data is not None:
             form, _ = theorem_1(exact.data)
+            L_star = exact.data.L
             at_values = " (at the parameters' values; with them symbolic: " + why + ")" if form is not None else ""
     if form is None:
         return Hamiltonization(None, None, {**summary, "verdict": "none", "reason": (
@@ -143,14 +152,14 @@ def _hamiltonization(data: LagrangianData) -> Hamiltonization:
                                      f"constraint manifold ({how})")
     form = replace(form, system_kind=KIND, proof=proof, from_indices=(*shape, *(n + i for i in shape)))
     reduced_time = ReducedTime(N, f"d tau = N dt, N = {sp.sstr(N)} (Theorem 1, on the Chaplygin reduction)", "2704-8",
-                               "s (times N's unit)")
+                               "s (times N's unit)", regular=analytic_and_positive(N))
     return Hamiltonization(form, reduced_time, {**summary, "verdict": "found", "reducing_multiplier": sp.sstr(N),
                                                 "hamiltonian_form": form.formula,
                                                 "reason": "Theorem 1: N solves dN/dq1 = N A2, dN/dq2 = -N A1 "
                                                           "(the integrability condition "
                                                           f"holds){at_values}; the reduced system is the user's "
                                                           f"field on the constraint manifold ({how})",
-                                                "at_values": bool(at_values)})
+                                                "at_values": bool(at_values)}, shape, L_star)
 
 
 def hamiltonization(data: LagrangianData) -> Hamiltonization:

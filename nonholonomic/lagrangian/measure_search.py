@@ -44,7 +44,7 @@ from nonholonomic.lagrangian.parse import LagrangianData
 from nonholonomic.rational_trig import rational_trig_is_zero
 from nonholonomic.work_limits import MAX_INTEGRATE_OPS, operations, over
 
-__all__ = ["POINTWISE_TOLERANCE", "MeasureVerdict", "measure_verdict"]
+__all__ = ["POINTWISE_TOLERANCE", "MeasureVerdict", "implied_by_multiplier", "measure_verdict"]
 
 #: Pointwise relative residual |Σᵢ ∂(ρ fᵢ)/∂xᵢ| / Σᵢ |∂(ρ fᵢ)/∂xᵢ| accepted for ``found``.
 POINTWISE_TOLERANCE = 1e-12
@@ -176,12 +176,22 @@ def _search(data: LagrangianData) -> tuple:
     return (*again[:4], reason, again[5], out[6] + again[6])
 
 
-def _search_symbolic(data: LagrangianData) -> tuple:
-    """The verdict's fields (as :class:`MeasureVerdict`'s), parameters kept symbolic."""
-    start = time.perf_counter()
+@dataclass(frozen=True)
+class _Flow:
+    """The user's flow on the constraint manifold in (q, u): q̇ = B(q) u and u̇; its divergence."""
+
+    u: tuple[sp.Symbol, ...]
+    dependent: tuple[tuple[sp.Symbol, sp.Expr], ...]
+    B: sp.Matrix
+    qdot: list[sp.Expr]
+    field: tuple[sp.Expr, ...]
+    div: sp.Expr
+
+
+def _flow(data: LagrangianData) -> _Flow:
+    """The reduced flow of ``data`` in (q, u), u the velocities left after solving the constraints."""
     q, v = data.q, data.v
     n, k = len(q), data.A.shape[0]
-    points = _exact_points(data)
     float_points = sample_points(data)
     eqs = derive(data)
     dep = _dependent_columns(data)
@@ -204,6 +214,17 @@ def _search_symbolic(data: LagrangianData) -> tuple:
     udot = [tidy(eqs.qddot[j].xreplace(on_manifold)) for j in ind]
     field = (*qdot, *udot)
     div = tidy(sum((sp.diff(e, x) for e, x in zip(field, (*q, *u))), sp.Integer(0)))
+    return _Flow(u, dependent, B, qdot, field, div)
+
+
+def _search_symbolic(data: LagrangianData) -> tuple:
+    """The verdict's fields (as :class:`MeasureVerdict`'s), parameters kept symbolic."""
+    start = time.perf_counter()
+    q = data.q
+    points = _exact_points(data)
+    float_points = sample_points(data)
+    flow = _flow(data)
+    u, dependent, B, qdot, field, div = flow.u, flow.dependent, flow.B, flow.qdot, flow.field, flow.div
 
     def fail(status: str, reason: str) -> tuple:
         return status, None, u, dependent, reason, None, time.perf_counter() - start
@@ -393,6 +414,65 @@ def measure_verdict(data: LagrangianData) -> MeasureVerdict:
                               f"without cancellation ({eqs.elimination}), so the divergence has no closed form to "
                               "solve X_j ln rho = -c_j with")
     outcome = bounded.run(("lagrangian.measure", data), _search, (data,))
+    if outcome.status != "done":
+        return MeasureVerdict("undecided", None, (), (), f"sympy could not decide: {outcome.message}", None,
+                              outcome.seconds)
+    return MeasureVerdict(*outcome.value)
+
+
+def _implied(data: LagrangianData, N: sp.Expr, shape: tuple[int, ...], L_star: sp.Expr) -> tuple:
+    """The verdict's fields for the density ``N det M* |det ∂q̇_s/∂u|`` (see :func:`implied_by_multiplier`)."""
+    start = time.perf_counter()
+    points = _exact_points(data)
+    flow = _flow(data)
+    shape_velocities = [data.v[i] for i in shape]
+    mass = sp.Matrix(2, 2, lambda i, j: sp.diff(L_star, shape_velocities[i], shape_velocities[j]))
+    on = dict(flow.dependent)
+    in_u = [tidy(sp.sympify(s).xreplace(on)) for s in shape_velocities]
+    jacobian = sp.Matrix(2, len(flow.u), lambda i, j: sp.diff(in_u[i], flow.u[j])).det() if len(flow.u) == 2 else 0
+    if jacobian == 0:
+        return ("undecided", None, flow.u, flow.dependent, "the shape velocities are not coordinates of the "
+                "constraint manifold's velocities", None, time.perf_counter() - start)
+    rho = tidy(N * mass.det() * jacobian)
+    point = sample_points(data)[0]
+    value = number(rho, point)
+    if value is not None and value < 0:
+        rho = -rho
+    ln_rho = sp.expand_log(sp.log(rho), force=True)
+    bracket = flow.div + sum((sp.diff(ln_rho, qi) * fi for qi, fi in zip(data.q, flow.qdot)), sp.Integer(0))
+    how = (f"implied by Theorem 1's reducing multiplier N = {sp.sstr(N)}: rho = N det M* |det d(q_dot_shape)/du| "
+           f"with M* = d2 L*/d q_dot_shape^2 (Theorem 1's proof read backwards)")
+    if _zero(bracket, data, points) is not True:
+        return ("undecided", None, flow.u, flow.dependent, f"{how}: div(rho f)/rho did not reduce to 0", None,
+                time.perf_counter() - start)
+    residual = _pointwise(data, rho, flow.field, (*data.q, *flow.u))
+    if not residual <= POINTWISE_TOLERANCE:
+        return ("undecided", None, flow.u, flow.dependent, f"{how}: pointwise residual {residual:.3g} above "
+                f"{POINTWISE_TOLERANCE:g}", None, time.perf_counter() - start)
+    reason = (f"rho = {sp.sstr(rho)} in the coordinates (q, u), u = ({', '.join(map(str, flow.u))}), {how}; "
+              f"div(rho f)/rho vanishes identically and pointwise (max relative residual {residual:.1e} at "
+              f"{POINTWISE_STATES} random states)")
+    return "found", rho, flow.u, flow.dependent, reason, residual, time.perf_counter() - start
+
+
+def implied_by_multiplier(data: LagrangianData, N: sp.Expr, shape: tuple[int, ...], L_star: sp.Expr) -> MeasureVerdict:
+    """The invariant measure Theorem 1's reducing multiplier implies, proven as the search's are.
+
+    Theorem 1's proof (eq. 2704-10): the reduced system in (q_s, P), P = ∂L*/∂q̇_s, has the invariant measure
+    ρ(q) dP dq exactly when ∂ρ/∂q₁ = ρ A₂, ∂ρ/∂q₂ = −ρ A₁, the equations N solves; so N(q) dP dq is invariant. In
+    (q_s, q̇_s), dP = det M* dq̇_s, M* = ∂²L*/∂q̇_s²; the cyclic coordinates' velocities are functions of
+    (q_s, q̇_s), so N det M* dq dq̇_s is invariant for the user's flow on the constraint manifold, and in the
+    search's coordinates (q, u) the density is N det M* |det ∂q̇_s/∂u|. Proven (div(ρ f)/ρ cancelled on the
+    manifold) and checked pointwise before it is ``found``; else ``undecided`` with the reason.
+
+    Parameters
+    ----------
+    data : the user's system.
+    N : Theorem 1's reducing multiplier, in the user's coordinates.
+    shape : indices of the shape coordinates q₁, q₂.
+    L_star : the reduced Lagrangian L* (its velocity terms) in the user's symbols.
+    """
+    outcome = bounded.run(("lagrangian.implied_measure", data, N), _implied, (data, N, shape, L_star))
     if outcome.status != "done":
         return MeasureVerdict("undecided", None, (), (), f"sympy could not decide: {outcome.message}", None,
                               outcome.seconds)

@@ -3,8 +3,10 @@
 The heyoka integrator is generated from the symbolic right-hand side (:mod:`nonholonomic.numerics.taylor`),
 with the parameters as runtime parameters (``hy.par``), so one compiled integrator serves every
 parameter value; it is compiled once per (system, tolerance) and process, and copied once per
-thread. Where the system has a reduced time ``τ = ∫ ρ dt``, it is integrated as one more state
-variable.
+thread. Where the system has a regular reduced time ``τ = ∫ ρ dt`` (ρ analytic and positive), it is
+integrated as one more state variable; otherwise by quadrature along the dense output, segment by segment,
+where ρ's zeros, sign changes and kinks are located (:mod:`nonholonomic.numerics.reduced_time`; every segment
+then uses the continuous output).
 
 The run is cut into segments, with no Python code per step where heyoka can do the work:
 
@@ -41,6 +43,7 @@ import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.numerics.kernels import numeric
+from nonholonomic.numerics.reduced_time import DensityQuadrature, ReducedTimeReport
 from nonholonomic.numerics.taylor import TaylorSystem, taylor_system
 
 MACHINE_EPSILON = float(np.finfo(float).eps)
@@ -88,7 +91,8 @@ class Trajectory:
 
     ``states`` and ``step_states`` have shape ``(n, dim)`` in the order of ``system.state_symbols``.
     ``wall_time_s`` is the integration's wall time; for a member of :func:`integrate_batch`, its
-    batch's wall time divided among the batch's members.
+    batch's wall time divided among the batch's members. ``reduced_time`` says how τ was integrated when by
+    quadrature (where N vanished, changed sign, stopped being real; the independent check).
     """
 
     t: np.ndarray
@@ -101,6 +105,25 @@ class Trajectory:
     steps: int
     wall_time_s: float
     versions: dict[str, str]
+    reduced_time: ReducedTimeReport | None = None
+    reduced_time_check: tuple[float, float, bool] | None = None
+    """(residual, tolerance, passed) of τ against the independent Romberg quadrature."""
+
+
+def density_quadrature(system: MechanicalSystem, p: np.ndarray) -> DensityQuadrature | None:
+    """The quadrature of τ for ``system`` at ``p`` when its reduced time is not regular, else None."""
+    if system.reduced_time is None or system.reduced_time.regular:
+        return None
+    kernels = numeric(system)
+    density, kinks = kernels.time_density, kernels.time_density_kinks
+    return DensityQuadrature(lambda states: density(np.ascontiguousarray(states), p)[:, 0],
+                             None if kinks is None else lambda states: kinks(np.ascontiguousarray(states), p))
+
+
+def _check_of(quadrature: DensityQuadrature | None) -> tuple[float, float, bool] | None:
+    if quadrature is None:
+        return None
+    return quadrature.report.check_residual, quadrature.check_tolerance(), quadrature.check_passed()
 
 
 class StepRecorder:
@@ -319,9 +342,17 @@ def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, g
     times, where = np.unique(grid, return_inverse=True)  # propagate_grid wants increasing times
     recorder = StepRecorder()
     nsteps = 0
+    quadrature = density_quadrature(system, p)
+    tau = np.zeros(len(times))
     if len(times) == 1:
         out = ta.state[None].copy()
         recorder.add(0.0, ta.state[:n])
+    elif quadrature is not None:  # every segment with the continuous output, which τ's quadrature reads
+        out = np.empty((len(times), nv))
+        out[0] = ta.state
+        recorder.add(0.0, ta.state[:n])
+        nsteps = _segments_with_continuous_output(ta, n, times, out, 1, recorder, progress, quadrature, tau)
+        out[-1] = ta.state
     else:
         # First segment: propagate_grid writes the samples, a lean callback logs the states.
         log, log_t = bytearray(ta.state.tobytes()), [0.0]
@@ -339,32 +370,51 @@ def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, g
         done = int(np.searchsorted(times, ta.time, side="right"))
         out = np.empty((len(times), nv))  # the rows of the grid times reached so far, the others to come
         out[:done] = reached[:done]
-        # A long run: segments with heyoka's continuous output (no Python per step).
-        segments, t_final = _Segments(nv, ta.order), float(times[-1])
-        while outcome == hy.taylor_outcome.step_limit:
-            if progress is not None and not progress(min(ta.time / t_final, 1.0)):
-                raise IntegrationCancelled(f"cancelled at t = {ta.time:g}")
-            tic = time.perf_counter()
-            outcome, _, _, steps, c_out, _ = ta.propagate_until(t_final, max_steps=segments.steps, c_output=True)
-            if outcome not in _GOING:
-                raise _failure(ta.time, outcome)
-            nsteps += steps
-            if steps:
-                # The state after each step: the next step's order-0 Taylor coefficients, then the current state.
-                recorder.extend(c_out.times[1:], np.concatenate([c_out.tcs[1:, :n, 0], ta.state[None, :n]]))
-                upto = int(np.searchsorted(times, ta.time, side="right"))
-                if upto > done:
-                    out[done:upto] = c_out(np.ascontiguousarray(times[done:upto]))
-                    done = upto
-            segments.update(steps, time.perf_counter() - tic)
+        if outcome == hy.taylor_outcome.step_limit:  # a long run
+            nsteps += _segments_with_continuous_output(ta, n, times, out, done, recorder, progress)
         out[-1] = ta.state  # the last sample is the final state itself
     out = out[where]
+    tau_out = out[:, n].copy() if ts.has_tau else (tau[where] if quadrature is not None else None)
     return Trajectory(
-        t=grid, tau=out[:, n].copy() if ts.has_tau else None, states=out[:, :n].copy(),
+        t=grid, tau=tau_out, states=out[:, :n].copy(),
         step_t=recorder.t, step_states=recorder.states,
         engine="heyoka", tolerance=tol, steps=int(nsteps),
         wall_time_s=time.perf_counter() - start, versions=_versions(),
+        reduced_time=None if quadrature is None else quadrature.report, reduced_time_check=_check_of(quadrature),
     )
+
+
+def _segments_with_continuous_output(ta: hy.taylor_adaptive, n: int, times: np.ndarray, out: np.ndarray, done: int,
+                                     recorder: StepRecorder, progress: ProgressCallback | None,
+                                     quadrature: DensityQuadrature | None = None, tau: np.ndarray | None = None) -> int:
+    """Go on to ``times[-1]`` in segments of ``propagate_until(..., c_output=True)`` (no Python per step), writing
+    the samples from ``done`` on into ``out`` and, with ``quadrature``, τ into ``tau``; returns the steps taken.
+
+    The segments last about :data:`SEGMENT_WALL_TIME_S` each (sized from the measured time per step), except with
+    ``quadrature``: then they have a fixed number of steps, since where τ's events are looked for depends on them
+    and no clock may change an answer."""
+    segments, t_final = _Segments(len(ta.state), ta.order), float(times[-1])
+    outcome, nsteps = hy.taylor_outcome.step_limit, 0
+    while outcome == hy.taylor_outcome.step_limit:
+        if progress is not None and not progress(min(ta.time / t_final, 1.0)):
+            raise IntegrationCancelled(f"cancelled at t = {ta.time:g}")
+        tic = time.perf_counter()
+        outcome, _, _, steps, c_out, _ = ta.propagate_until(t_final, max_steps=segments.steps, c_output=True)
+        if outcome not in _GOING:
+            raise _failure(ta.time, outcome)
+        nsteps += steps
+        if steps:
+            # The state after each step: the next step's order-0 Taylor coefficients, then the current state.
+            recorder.extend(c_out.times[1:], np.concatenate([c_out.tcs[1:, :n, 0], ta.state[None, :n]]))
+            upto = int(np.searchsorted(times, ta.time, side="right"))
+            if upto > done:
+                out[done:upto] = c_out(np.ascontiguousarray(times[done:upto]))
+            if quadrature is not None and tau is not None:
+                tau[done:upto] = quadrature.add(c_out, np.asarray(c_out.times, dtype=float), times[done:upto])
+            done = max(done, upto)
+        if quadrature is None:
+            segments.update(steps, time.perf_counter() - tic)
+    return nsteps
 
 
 def _integrate_scipy(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, grid: np.ndarray,
@@ -374,7 +424,8 @@ def _integrate_scipy(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, gr
     start = time.perf_counter()
 
     n = system.dimension
-    tau_kernel = numeric(system).time_density if system.reduced_time else None
+    quadrature = density_quadrature(system, p)
+    tau_kernel = numeric(system).time_density if system.taylor_time_density is not None else None
 
     def f(t: float, y: np.ndarray) -> np.ndarray:
         if progress is not None and not progress(min(t / t_final, 1.0)):
@@ -392,9 +443,14 @@ def _integrate_scipy(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, gr
     out = sol.sol(grid).T
     out[0] = y_start
     out[-1] = sol.y[:, -1]
+    tau = out[:, n].copy() if tau_kernel is not None else None
+    if quadrature is not None:
+        times, where = np.unique(grid, return_inverse=True)
+        tau = quadrature.add(lambda t: sol.sol(t).T, sol.t, times)[where]
     return Trajectory(
-        t=grid, tau=out[:, n].copy() if tau_kernel is not None else None, states=out[:, :n].copy(),
+        t=grid, tau=tau, states=out[:, :n].copy(),
         step_t=sol.t.copy(), step_states=sol.y[:n].T.copy(),
         engine="scipy", tolerance=tol, steps=len(sol.t) - 1,
         wall_time_s=time.perf_counter() - start, versions=_versions(),
+        reduced_time=None if quadrature is None else quadrature.report, reduced_time_check=_check_of(quadrature),
     )

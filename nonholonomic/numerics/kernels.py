@@ -18,6 +18,7 @@ import sympy as sp
 
 from nonholonomic import memo
 from nonholonomic.definition import MechanicalSystem
+from nonholonomic.expressions.smoothness import kink_arguments
 from nonholonomic.numerics.numpy_function import lambdify_numpy
 
 VectorKernel = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -99,6 +100,18 @@ class NumericSystem:
         return self._kernel("time_density", lambda: vectorize([reduced_time.density], self._args))
 
     @cached_property
+    def time_density_kinks(self) -> VectorKernel | None:
+        """The arguments g at whose zeros ``dτ/dt`` may fail to be analytic (:func:`kink_arguments`), then their
+        time derivatives (∇g, f), as columns; None if there are none."""
+        system = self.system
+        if system.reduced_time is None:
+            raise AttributeError(f"{system.kind} has no reduced time")
+        arguments = kink_arguments(system.reduced_time.density)
+        rates = [sum(sp.diff(g, x) * f for x, f in zip(system.state_symbols, system.rhs)) for g in arguments]
+        return self._kernel("time_density_kinks", lambda: vectorize([*arguments, *rates], self._args)) \
+            if arguments else None
+
+    @cached_property
     def constraint_scales(self) -> VectorKernel:
         exprs = [c.scale for c in self.system.constraints] or [sp.Integer(1)]
         return self._kernel("constraint_scales", lambda: vectorize(exprs, self._args))
@@ -125,7 +138,7 @@ class NumericSystem:
         """Compile every kernel now (a worker's warm-up)."""
         for name, attr in type(self).__dict__.items():
             if (isinstance(attr, cached_property) and not name.startswith("_")
-                    and (name != "time_density" or self.system.reduced_time)):
+                    and (name not in ("time_density", "time_density_kinks") or self.system.reduced_time)):
                 getattr(self, name)
 
     def rhs_single(self, y: np.ndarray, p: np.ndarray) -> np.ndarray:

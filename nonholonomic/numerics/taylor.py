@@ -3,8 +3,8 @@
 Every heyoka integrator of the core (single trajectories, batch mode, Poincaré events, variational
 equations) is built from :func:`taylor_system`, so the right-hand side is written once, in sympy,
 in the system's module. State symbols become heyoka variables (``M1`` ... in the order of
-``system.state_symbols``), then ``tau`` when the system has a reduced time; parameters become
-runtime parameters ``hy.par[i]``, so one compiled integrator serves every parameter value.
+``system.state_symbols``), then ``tau`` when the system has a regular reduced time (``taylor_time_density``);
+parameters become runtime parameters ``hy.par[i]``, so one compiled integrator serves every parameter value.
 
 The Taylor integrator evaluates the right-hand side once per Taylor order and step, so every
 elementary operation it contains is paid ~20 times per step. The translation therefore removes
@@ -185,17 +185,18 @@ class _TaylorForm(TypedDict):
 
 def _taylor_form(system: MechanicalSystem) -> _TaylorForm:
     """Every field of the :class:`TaylorSystem` of ``system`` but the system itself (it pickles)."""
-    names = [str(s) for s in system.state_symbols] + (["tau"] if system.reduced_time else [])
+    density = system.taylor_time_density
+    names = [str(s) for s in system.state_symbols] + (["tau"] if density is not None else [])
     hvars = hy.make_vars(*names)
     if len(names) == 1:
         hvars = [hvars]
-    exprs = list(system.rhs) + ([system.reduced_time.density] if system.reduced_time else [])
+    exprs = list(system.rhs) + ([density] if density is not None else [])
     state = dict(zip(system.state_symbols, hvars))
     best = _translate(exprs, state, _Parameters(system.parameter_symbols))
     derived = tuple(best.parameters.derived)
     fn = lambdify_numpy(system.parameter_symbols, derived) if derived else None
     return {"variables": tuple(hvars), "rhs": tuple(best.expressions), "n_state": system.dimension,
-            "has_tau": system.reduced_time is not None, "n_pars": len(system.parameter_symbols) + len(derived),
+            "has_tau": density is not None, "n_pars": len(system.parameter_symbols) + len(derived),
             "derived_parameters": derived, "operations": best.operations, "strategy": best.strategy,
             "_derived": fn, "_parameters": best.parameters.copy(frozen=True)}
 

@@ -44,6 +44,7 @@ from nonholonomic.definition import (
     StateVector,
 )
 from nonholonomic.expressions import ExpressionError, declare_symbols, parse_expression
+from nonholonomic.expressions.smoothness import analytic_and_positive
 from nonholonomic.kinds import SystemKind
 from nonholonomic.memo import remembered
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH, MAX_EXPRESSION_PARAMETERS, smooth_potential
@@ -276,7 +277,8 @@ def define(data: ChaplyginData, reduce: bool = True) -> MechanicalSystem:
         measure = InvariantMeasure(N * (G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0]),
                                    f"rho(q) det G(q), rho = N = {sp.sstr(N)}, G = d2L/dq_dot2 (density for dq dq_dot; "
                                    "rho dP dq of Theorem 1 with dP = det G dq_dot)", "2704-8")
-        reduced = ReducedTime(N, f"d tau = N dt, N = {sp.sstr(N)} (Theorem 1)", "2704-8", "s (times N's unit)")
+        reduced = ReducedTime(N, f"d tau = N dt, N = {sp.sstr(N)} (Theorem 1)", "2704-8", "s (times N's unit)",
+                              regular=analytic_and_positive(N))
     else:
         measure = InvariantMeasure(None, f"none claimed: {why}", "2704-7")
         reduced = None

@@ -54,9 +54,9 @@ from nonholonomic.kinds import SystemKind
 from nonholonomic.lagrangian import DataError, LagrangianData, derive
 from nonholonomic.lagrangian.checks import number, sample_points
 from nonholonomic.lagrangian.equations import energy_of, plain_field
-from nonholonomic.lagrangian.hamiltonization_search import hamiltonization
+from nonholonomic.lagrangian.hamiltonization_search import Hamiltonization, hamiltonization
 from nonholonomic.lagrangian.integral_search import integral_search
-from nonholonomic.lagrangian.measure_search import measure_verdict
+from nonholonomic.lagrangian.measure_search import MeasureVerdict, implied_by_multiplier, measure_verdict
 from nonholonomic.lagrangian.parse import KIND, MAX_COORDINATES, RESERVED, VELOCITY_SUFFIX
 from nonholonomic.memo import remembered
 from nonholonomic.systems.lagrangian_classics import CLASSICS
@@ -120,9 +120,9 @@ def _projections(data: LagrangianData) -> tuple[Projection, ...]:
     return tuple(out)
 
 
-def _measure(data: LagrangianData) -> tuple[InvariantMeasure, dict[str, Any]]:
+def _measure(data: LagrangianData, verdict: MeasureVerdict | None = None) -> tuple[InvariantMeasure, dict[str, Any]]:
     """The invariant measure the search proves (or none claimed, with the verdict), and the verdict as JSON."""
-    verdict = measure_verdict(data)
+    verdict = measure_verdict(data) if verdict is None else verdict
     summary: dict[str, Any] = {"verdict": verdict.status, "reason": verdict.reason,
                                "seconds": round(verdict.seconds, 3),
                                "independent_velocities": [str(u) for u in verdict.velocities],
@@ -142,6 +142,38 @@ def _measure(data: LagrangianData) -> tuple[InvariantMeasure, dict[str, Any]]:
     summary.update(density=sp.sstr(verdict.density), density_in_state=sp.sstr(density), residual=verdict.residual,
                    at_values="substituted exactly" in verdict.reason)
     return InvariantMeasure(density, formula, EQUATION, on_manifold=verdict.dependent), summary
+
+
+def _with_multiplier(data: LagrangianData, measure: InvariantMeasure, summary: dict[str, Any],
+                     theorem: Hamiltonization) -> tuple[InvariantMeasure, dict[str, Any]]:
+    """The measure verdict made consistent with Theorem 1's (issue 33): a reducing multiplier N implies the measure
+    N det M* |det d(q_dot_shape)/du| (:func:`implied_by_multiplier`), proven like the search's. Where the search
+    did not find one, the implied one is claimed once proven (the search's own verdict kept in the reason); where
+    it did, the two densities are compared at the sample points (their ratio, if not constant, is an integral)."""
+    if theorem.summary.get("verdict") != "found" or theorem.L_star is None or theorem.reduced_time is None:
+        return measure, summary
+    implied = implied_by_multiplier(data, theorem.reduced_time.density, theorem.shape, theorem.L_star)
+    if summary["verdict"] == "found":
+        agree = None
+        if implied.status == "found" and measure.density is not None:
+            other, _ = _measure(data, implied)
+            assert other.density is not None
+            ratios = [number(measure.density / other.density, point) for point in sample_points(data)]
+            known = [r for r in ratios if r is not None]
+            agree = bool(known) and max(known) - min(known) <= 1e-12 * max(abs(r) for r in known)
+        summary = {**summary, "implied_by_multiplier": {
+            "verdict": implied.status, "density": None if implied.density is None else sp.sstr(implied.density),
+            "same_up_to_a_constant": agree, "reason": implied.reason}}
+        return measure, summary
+    if implied.status != "found":
+        return measure, {**summary, "reason": f"{summary['reason']}; Theorem 1's reducing multiplier implies a "
+                                              f"measure, not proven: {implied.reason}"}
+    search = f"the search alone: {summary['verdict']} ({summary['reason']})"
+    if summary["verdict"] == "none":
+        search = ("the search's obstruction is contradicted by this proof, which is kept (please report the "
+                  f"system); {search}")
+    measure, found = _measure(data, implied)
+    return measure, {**found, "derived_from": "reducing_multiplier", "reason": f"{found['reason']}; {search}"}
 
 
 def _integrals(data: LagrangianData) -> tuple[list[FirstIntegral], dict[str, Any]]:
@@ -238,6 +270,7 @@ def _assemble(data: LagrangianData, rhs: tuple[sp.Expr, ...], reduce: bool, gene
         # the ansatz is solved at the parameters' values: a generic definition does not seek it
         found, integrals_summary = ([], {"status": "not sought", "reason": GENERIC}) if generic else _integrals(data)
         theorem = hamiltonization(data)
+        measure, summary = _with_multiplier(data, measure, summary, theorem)
         form, reduced_time = theorem.form, theorem.reduced_time
         if generic and measure.density is not None and summary.get("at_values"):  # found only at the values
             measure = InvariantMeasure(None, f"not claimed: {GENERIC}; {measure.formula}", EQUATION)

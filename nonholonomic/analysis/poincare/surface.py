@@ -193,7 +193,8 @@ class _SurfaceKernels:
 @lru_cache(maxsize=64)
 def _surface_kernels(system: MechanicalSystem, expr: sp.Expr) -> _SurfaceKernels:
     ts = taylor_system(system)
-    n, has_tau = system.dimension, system.reduced_time is not None
+    density = system.taylor_time_density  # τ at the crossings only where the integrator carries it
+    n, has_tau = system.dimension, density is not None
     slices, norm_of, start = [], [], 0
     for vec in system.state:
         slices.append(slice(start, start + len(vec.symbols)))
@@ -201,7 +202,7 @@ def _surface_kernels(system: MechanicalSystem, expr: sp.Expr) -> _SurfaceKernels
         start += len(vec.symbols)
     gradient = [sp.diff(expr, s) for s in system.state_symbols]
     rows = [expr, sum(d * f for d, f in zip(gradient, system.rhs))] + list(system.rhs)
-    rows += [system.reduced_time.density] if system.reduced_time is not None else []  # has_tau
+    rows += [density] if density is not None else []  # has_tau
     derived = []
     for derived_vec in system.derived:
         derived.append((derived_vec.name, slice(len(rows), len(rows) + len(derived_vec.expression))))
