@@ -250,12 +250,17 @@ class InvariantMeasure:
     ``on_manifold``: the claim holds on an invariant manifold of the state only (a Lagrangian system's
     constraint manifold A(q) q̇ = 0), given as substitutions ``symbol → expression`` that solve its
     equations; ``div(density · f)`` vanishes identically after them (and pointwise at states on it).
+
+    ``verified``: how the density was established when no symbolic proof is tried (a system without a closed
+    form of its field: a randomized identity test at high precision,
+    :mod:`nonholonomic.lagrangian.sampled_search`); the symbolic check then reports it instead of a proof.
     """
 
     density: sp.Expr | None
     formula: str
     equation: str
     on_manifold: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+    verified: str | None = None
 
 
 @dataclass(frozen=True)

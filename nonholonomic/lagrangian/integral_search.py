@@ -39,6 +39,7 @@ from nonholonomic import bounded
 from nonholonomic.lagrangian.equations import derive
 from nonholonomic.lagrangian.measure_search import _dependent_columns, _Failed
 from nonholonomic.lagrangian.parse import LagrangianData
+from nonholonomic.lagrangian.sampled_search import sampled_integrals
 
 __all__ = ["MAX_PROOF_TERMS", "NOT_EXHAUSTIVE", "Integral", "IntegralSearch", "integral_search"]
 
@@ -471,11 +472,36 @@ def integral_search(data: LagrangianData) -> IntegralSearch:
     """
     eqs = derive(data)
     if not eqs.closed_form:
-        return IntegralSearch("undecided", (), (), "", (), (1, 2), 0, "not searched: the equations of motion were "
-                              f"eliminated without cancellation ({eqs.elimination}); {NOT_EXHAUSTIVE}", 0.0)
+        sampled = bounded.run(("lagrangian.sampled_integrals", data), _sampled, (data, eqs.elimination))
+        if sampled.status == "done":
+            return sampled.value
+        return IntegralSearch("undecided", (), (), "", (), (1,), 0, "the equations of motion were eliminated without "
+                              f"cancellation ({eqs.elimination}) and the sampled ansatz failed: {sampled.message}; "
+                              f"{NOT_EXHAUSTIVE}", sampled.seconds)
     outcome = bounded.run(("lagrangian.integrals", data), _search, (data,))
     if outcome.status == "done":
         return IntegralSearch(*outcome.value)
     message = outcome.message.split(": ", 1)[1] if outcome.message.startswith("_Failed") else outcome.message
     reason = f"not searched: {message}"
     return IntegralSearch("undecided", (), (), "", (), (1, 2), 0, f"{reason}; {NOT_EXHAUSTIVE}", outcome.seconds)
+
+
+def _sampled(data: LagrangianData, elimination: str) -> IntegralSearch:
+    """The integrals linear in the velocities of a system without a closed form of its field, fitted on sampled
+    states (:func:`nonholonomic.lagrangian.sampled_search.sampled_integrals`), the energy first (from L)."""
+    dependent = _dependent_columns(data)
+    found = sampled_integrals(data, dependent)
+    u = tuple(data.v[j] for j in range(len(data.q)) if j not in dependent)
+    integrals = []
+    energy = derive(data).energy
+    if energy is not None:
+        integrals.append(Integral("energy", 2, energy, "E = (q_dot, dL/dq_dot) - L (not in the ansatz: from L)",
+                                  "proven: the constraint forces do no work (q_dot^T A^T lambda = 0 on the "
+                                  "constraint manifold)"))
+    for expression, proof in found.integrals:
+        name = f"F{len(integrals)}"
+        integrals.append(Integral(name, 1, expression, f"{name} = {sp.sstr(expression)}", proof))
+    reason = (f"the equations of motion were eliminated without cancellation ({elimination}), so an ansatz linear in "
+              f"the velocities was fitted on sampled states instead: {found.searched}; {len(found.integrals)} "
+              f"found; {NOT_EXHAUSTIVE}")
+    return IntegralSearch("done", tuple(integrals), u, found.searched, (), (1,), 0, reason, found.seconds)

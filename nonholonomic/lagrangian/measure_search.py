@@ -41,6 +41,7 @@ from nonholonomic import bounded
 from nonholonomic.lagrangian.checks import number, sample_points
 from nonholonomic.lagrangian.equations import _solve, dependent_columns, derive, tidy
 from nonholonomic.lagrangian.parse import LagrangianData
+from nonholonomic.lagrangian.sampled_search import sampled_measure
 from nonholonomic.rational_trig import rational_trig_is_zero
 from nonholonomic.work_limits import MAX_INTEGRATE_OPS, operations, over
 
@@ -410,9 +411,7 @@ def measure_verdict(data: LagrangianData) -> MeasureVerdict:
     """
     eqs = derive(data)
     if not eqs.closed_form:
-        return MeasureVerdict("undecided", None, (), (), "not searched: the equations of motion were eliminated "
-                              f"without cancellation ({eqs.elimination}), so the divergence has no closed form to "
-                              "solve X_j ln rho = -c_j with")
+        return _sampled(data, f"the equations of motion were eliminated without cancellation ({eqs.elimination})")
     outcome = bounded.run(("lagrangian.measure", data), _search, (data,))
     if outcome.status != "done":
         return MeasureVerdict("undecided", None, (), (), f"sympy could not decide: {outcome.message}", None,
@@ -475,5 +474,28 @@ def implied_by_multiplier(data: LagrangianData, N: sp.Expr, shape: tuple[int, ..
     outcome = bounded.run(("lagrangian.implied_measure", data, N), _implied, (data, N, shape, L_star))
     if outcome.status != "done":
         return MeasureVerdict("undecided", None, (), (), f"sympy could not decide: {outcome.message}", None,
+                              outcome.seconds)
+    return MeasureVerdict(*outcome.value)
+
+
+def _sampled_fields(data: LagrangianData, why: str) -> tuple:
+    dependent = _dependent_columns(data)
+    found = sampled_measure(data, dependent)
+    u = tuple(data.v[j] for j in range(len(data.q)) if j not in dependent)
+    reason = f"{why}: no closed form of div f, so an ansatz was fitted on sampled states instead: {found.reason}"
+    if found.status == "found" and found.density is not None:
+        point = sample_points(data)[0]
+        density = found.density.replace(sp.Abs, lambda a: a if (number(a, point) or 1.0) > 0 else -a)
+        return "found", density, u, found.dependent, reason, None, found.seconds
+    return "undecided", None, u, found.dependent, reason, None, found.seconds
+
+
+def _sampled(data: LagrangianData, why: str) -> MeasureVerdict:
+    """The verdict of the sampled ansatz (:mod:`nonholonomic.lagrangian.sampled_search`) for a system without a
+    closed form of its field (an Abs from sqrt(sin^2 ...) taken with the sign it has at the sample point: a
+    density is defined up to a constant factor on each region where it does not vanish)."""
+    outcome = bounded.run(("lagrangian.sampled_measure", data), _sampled_fields, (data, why))
+    if outcome.status != "done":
+        return MeasureVerdict("undecided", None, (), (), f"{why}; the sampled ansatz failed: {outcome.message}", None,
                               outcome.seconds)
     return MeasureVerdict(*outcome.value)

@@ -141,7 +141,8 @@ def _measure(data: LagrangianData, verdict: MeasureVerdict | None = None) -> tup
                f"{sp.sstr(density)} in (q, q_dot) there")
     summary.update(density=sp.sstr(verdict.density), density_in_state=sp.sstr(density), residual=verdict.residual,
                    at_values="substituted exactly" in verdict.reason)
-    return InvariantMeasure(density, formula, EQUATION, on_manifold=verdict.dependent), summary
+    verified = verdict.reason if "randomized identity test" in verdict.reason else None
+    return InvariantMeasure(density, formula, EQUATION, on_manifold=verdict.dependent, verified=verified), summary
 
 
 def _with_multiplier(data: LagrangianData, measure: InvariantMeasure, summary: dict[str, Any],

@@ -28,7 +28,9 @@ against (``tests/api/test_lagrangian_classics.py``).
   within 10 s; spun the other way it keeps its sense over the same time (without dissipation it too turns,
   about ten times slower, near t = 22 s). Published: no invariant measure (the reversal is an attraction).
   Here its equations are too large for the exact elimination: they are eliminated without cancellation
-  (correct, compiled from a small DAG), so the measure and integral searches say ``undecided``, not searched.
+  (correct, compiled from a small DAG), so the searches fit an ansatz on sampled states
+  (:mod:`nonholonomic.lagrangian.sampled_search`): no density and no integral linear in the velocities in it,
+  so the measure is ``undecided`` (not ``none``: absence from an ansatz proves nothing).
 """
 
 from __future__ import annotations
