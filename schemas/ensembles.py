@@ -457,4 +457,7 @@ class MembersPage(BaseModel):
     offset: int
     limit: int
     total: int = Field(description="members of the ensemble")
+    components: dict[str, list[str]] = Field(default_factory=dict, description=(
+        "the name of each component of every state and derived vector (the system's own coordinates: x, theta, "
+        "x_dot ...; M1 ... for the catalog's kinds), as a job's result.system.components"))
     members: list[MemberResultModel]

@@ -361,15 +361,20 @@ class Client(SymbolicRoutes):
         path = f"/v1/ensembles/{ensemble_id}/members"
         if format == "json":
             return self._json("GET", path, params={"offset": offset, "limit": 100 if limit is None else limit})
-        return frames.members_frame(self._every_member(ensemble_id, offset, limit))
+        names: dict[str, list[str]] = {}
+        return frames.members_frame(self._every_member(ensemble_id, offset, limit, names), names)
 
-    def _every_member(self, ensemble_id: str, offset: int = 0, limit: int | None = None) -> Iterator[dict[str, Any]]:
+    def _every_member(self, ensemble_id: str, offset: int = 0, limit: int | None = None,
+                      names: dict[str, list[str]] | None = None) -> Iterator[dict[str, Any]]:
         """Members ``offset`` .. ``offset + limit`` page by page; a page leaves out the members of chunks not
-        done yet, so the pages advance by the indices asked for, not by the members they hold."""
+        done yet, so the pages advance by the indices asked for, not by the members they hold. ``names`` is
+        filled with the pages' component names (``components``) before the first member is yielded."""
         path, end = f"/v1/ensembles/{ensemble_id}/members", None if limit is None else offset + limit
         while end is None or offset < end:
             size = MEMBERS_PAGE if end is None else min(MEMBERS_PAGE, end - offset)
             page = self._json("GET", path, params={"offset": offset, "limit": size})
+            if names is not None:
+                names.update(page.get("components") or {})
             yield from page["members"]
             offset += size
             if offset >= page["total"]:

@@ -287,10 +287,12 @@ def section_npz_frame(arrays: Mapping[str, np.ndarray], attrs: Mapping[str, Any]
     return frame
 
 
-def members_frame(members: Iterable[Mapping[str, Any]]) -> pandas.DataFrame:
+def members_frame(members: Iterable[Mapping[str, Any]],
+                  names: Mapping[str, Sequence[str]] | None = None) -> pandas.DataFrame:
     """An ensemble's members as a table, one row per member indexed by ``member``.
 
-    Columns: ``status``, ``t_final``, ``tau_final``, ``initial_M1`` ... and ``final_M1`` ...,
+    Columns: ``status``, ``t_final``, ``tau_final``, ``initial_M1`` ... and ``final_M1`` ... (a system of one's
+    own: ``initial_x``, ``final_theta_dot`` ..., by ``names``, the members page's ``components``),
     ``drift_<integral>`` (each integral's max relative drift), ``checks_passed``, ``exponent_1`` ...
     (the Lyapunov exponents asked for), ``section_points`` and ``error``.
 
@@ -298,6 +300,8 @@ def members_frame(members: Iterable[Mapping[str, Any]]) -> pandas.DataFrame:
     ----------
     members : iterable of mapping
         The ``members`` of ``GET /v1/ensembles/{id}/members`` pages.
+    names : mapping, optional
+        Each vector's component names (the pages' ``components``); default ``M1`` ...
 
     Returns
     -------
@@ -309,7 +313,8 @@ def members_frame(members: Iterable[Mapping[str, Any]]) -> pandas.DataFrame:
         row: dict[str, Any] = {"member": m["index"], "status": m.get("status"),
                                "t_final": m.get("t_final"), "tau_final": m.get("tau_final")}
         for when in ("initial", "final"):
-            for name, value in components({k: [v] for k, v in (m.get(f"{when}_state") or {}).items()}).items():
+            state = {k: [v] for k, v in (m.get(f"{when}_state") or {}).items()}
+            for name, value in components(state, names=names).items():
                 row[f"{when}_{name}"] = value[0]
         for integral in m.get("integrals") or []:
             row[f"drift_{integral['name']}"] = integral["max_rel_drift"]

@@ -20,7 +20,7 @@ from service.errors import (
     ProblemError,
     problem_responses,
 )
-from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses
+from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses, vector_components
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
 from service.validation import POOL_FULL, validated
@@ -73,7 +73,8 @@ def get_members(ensemble_id: str, backend: Backend, owner: Owner, offset: int = 
     record = ensemble_of(backend, owner, ensemble_id)
     page = members_page(backend.ensembles, ensemble_id, record, offset, limit)
     total = sum(stop - start for start, stop in record["chunks"])
-    return JSONResponse({"offset": offset, "limit": limit, "total": total, "members": page})
+    components = vector_components(record["request"]["system"])
+    return JSONResponse({"offset": offset, "limit": limit, "total": total, "components": components, "members": page})
 
 
 @router.get("/{ensemble_id}/poincare", operation_id="ensembles-section", response_class=Response,

@@ -10,6 +10,7 @@ import numpy as np
 
 from nonholonomic.systems.generalized_chaplygin import EXAMPLE_JOB as VESELOVA_JOB
 from nonholonomic.systems.lagrangian import EXAMPLE_JOB as SLEIGH_JOB
+from nonholonomic_client import frames
 from tests.support import poll_job
 
 
@@ -42,6 +43,11 @@ def test_an_ensemble_of_a_lagrangian_system_equals_its_single_jobs(client):
         for name in ("q", "q_dot"):  # batch mode and a single integration: the same orbit
             np.testing.assert_allclose(member["final_state"][name], single["final_state"][name], rtol=0, atol=1e-9)
         assert all(i["max_rel_drift"] <= 1e-12 for i in member["integrals"])
+    page = client.get(f"/v1/ensembles/{view['id']}/members", params={"limit": 2}).json()
+    assert page["components"] == {"q": ["x", "y", "theta"], "q_dot": ["x_dot", "y_dot", "theta_dot"]}
+    table = frames.members_frame(page["members"], page["components"])  # issue 33: not initial_q1 ...
+    assert {"initial_x", "initial_theta", "final_theta_dot"} <= set(table.columns)
+    assert table.loc[1, "final_theta_dot"] == members[1]["final_state"]["q_dot"][2]
     assert client.get(f"/v1/ensembles/{view['id']}/poincare", params={"format": "csv"}).status_code == 200
     assert client.get(f"/v1/ensembles/{view['id']}/plots/poincare.png").status_code == 200
 
