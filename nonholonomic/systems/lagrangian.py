@@ -58,6 +58,7 @@ from nonholonomic.lagrangian.hamiltonization_search import Hamiltonization, hami
 from nonholonomic.lagrangian.integral_search import integral_search
 from nonholonomic.lagrangian.measure_search import MeasureVerdict, implied_by_multiplier, measure_verdict
 from nonholonomic.lagrangian.parse import KIND, MAX_COORDINATES, RESERVED, VELOCITY_SUFFIX
+from nonholonomic.lagrangian.regular_forms import dependent_velocities, regular_form
 from nonholonomic.memo import remembered
 from nonholonomic.systems.lagrangian_classics import CLASSICS
 
@@ -179,19 +180,28 @@ def _with_multiplier(data: LagrangianData, measure: InvariantMeasure, summary: d
 
 def _integrals(data: LagrangianData) -> tuple[list[FirstIntegral], dict[str, Any]]:
     """The proven integrals of the ansatz besides the energy, as claims checked along the trajectory, and the
-    search as JSON."""
+    search as JSON. An integral whose form in (q, u) has a denominator that vanishes (powers of the constraints'
+    minor) is claimed and shown in the full velocities where that form is regular (:func:`regular_form`; equal on
+    the constraint manifold), its form in (q, u) kept beside it."""
     search = integral_search(data)
-    claims = []
+    dependent = dependent_velocities(data) if search.integrals else ()
+    claims, found = [], []
     for integral in search.integrals:
+        regular = regular_form(data, integral.expression, dependent)
+        expression = integral.expression if regular is None else regular
+        shown: dict[str, Any] = {"name": integral.name, "degree": integral.degree, "expression": sp.sstr(expression),
+                                 "proof": integral.proof}
+        if regular is not None:
+            shown["expression_on_manifold"] = sp.sstr(integral.expression)
+        found.append(shown)
         if integral.name == "energy" or not integral.proven:
             continue
-        scale = sum((sp.Abs(term) for term in sp.Add.make_args(sp.expand(integral.expression))), sp.Integer(0))
-        claims.append(FirstIntegral(integral.name, integral.expression, scale, integral.formula,
+        scale = sum((sp.Abs(term) for term in sp.Add.make_args(sp.expand(expression))), sp.Integer(0))
+        formula = integral.formula if regular is None else f"{integral.name} = {sp.sstr(regular)} (on the manifold)"
+        claims.append(FirstIntegral(integral.name, expression, scale, formula,
                                     "ansatz linear/quadratic in the velocities"))
     summary = {"status": search.status, "ansatz": search.ansatz, "seconds": round(search.seconds, 3),
-               "found": [{"name": i.name, "degree": i.degree, "expression": sp.sstr(i.expression), "proof": i.proof}
-                         for i in search.integrals],
-               "omitted": search.omitted, "reason": search.reason}
+               "found": found, "omitted": search.omitted, "reason": search.reason}
     return claims, summary
 
 

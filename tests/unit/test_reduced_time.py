@@ -151,3 +151,31 @@ def test_kinks_inside_a_step_are_cut_and_an_absolute_value_integrates_exactly():
         assert np.max(np.abs(tau - np.array(exact) - offset * grid)) < 1e-13
         assert quadrature.report.zero_count == zeros
         assert quadrature.check_passed()
+
+
+def test_the_skate_s_integrals_are_claimed_in_a_form_regular_where_cos_theta_vanishes(skate):
+    """Issue 33, item 5: the searches found the energy as (... + 1500 x_dot²)/(2000 cos² θ), singular on the orbit;
+    it is claimed as 3/4 (x_dot cos θ + y_dot sin θ)² + θ_dot²/10 − g s x m/2 ..., equal on the manifold, and every
+    integral holds to 1e-12 across the 11 zeros of cos θ."""
+    from nonholonomic.simulation import simulate
+
+    system, p = skate
+    found = {i["name"]: i for i in system.structure["integrals"]["found"]}
+    for name in ("energy", "F1", "F2"):
+        assert "cos(theta)**2)" in found[name]["expression_on_manifold"]  # the singular form, kept beside
+        assert "/(" not in found[name]["expression"] and "/cos" not in found[name]["expression"]
+    result = simulate(system, dict(zip(map(str, system.parameter_symbols), p)),
+                      {"q": SKATE_STATE[:3], "q_dot": SKATE_STATE[3:]},
+                      20.0, 201)
+    drifts = {i.name: i.max_rel_drift for i in result.integrals}
+    assert {"F1", "F2", "F3"} <= set(drifts) and max(drifts.values()) < 1e-12
+    # on the manifold the two forms agree (an independent evaluation of each text)
+    symbols = {str(s): s for s in system.state_symbols}
+    rng = np.random.default_rng(2)
+    for theta, speed, rate, x in rng.uniform(-1.4, 1.4, (5, 4)):
+        at = {symbols["x"]: x, symbols["y"]: 0.3, symbols["theta"]: theta, symbols["theta_dot"]: rate,
+              symbols["x_dot"]: speed * math.cos(theta), symbols["y_dot"]: speed * math.sin(theta)}
+        for name in ("energy", "F1", "F2"):
+            regular, singular = (float(sp.sympify(found[name][key], locals=symbols).xreplace(at))
+                                 for key in ("expression", "expression_on_manifold"))
+            assert regular == pytest.approx(singular, rel=1e-12, abs=1e-12)
