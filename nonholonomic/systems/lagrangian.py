@@ -58,7 +58,7 @@ from nonholonomic.lagrangian.hamiltonization_search import Hamiltonization, hami
 from nonholonomic.lagrangian.integral_search import integral_search
 from nonholonomic.lagrangian.measure_search import MeasureVerdict, implied_by_multiplier, measure_verdict
 from nonholonomic.lagrangian.parse import KIND, MAX_COORDINATES, RESERVED, VELOCITY_SUFFIX
-from nonholonomic.lagrangian.regular_forms import dependent_velocities, regular_form
+from nonholonomic.lagrangian.regular_forms import dependent_velocities, regular_density, regular_form
 from nonholonomic.memo import remembered
 from nonholonomic.systems.lagrangian_classics import CLASSICS
 
@@ -137,6 +137,8 @@ def _measure(data: LagrangianData, verdict: MeasureVerdict | None = None) -> tup
     if dependent and (value := number(minor, point)) is not None and value < 0:
         sign = -1
     density = sp.factor(verdict.density * sign * minor)
+    regular = regular_density(density, point)
+    density = density if regular is None else regular
     u = ", ".join(map(str, verdict.velocities))
     formula = (f"rho dq du = {sp.sstr(verdict.density)} dq du on the constraint manifold (u = ({u})), i.e. the density "
                f"{sp.sstr(density)} in (q, q_dot) there")
