@@ -180,6 +180,18 @@ def _with_multiplier(data: LagrangianData, measure: InvariantMeasure, summary: d
     return measure, {**found, "derived_from": "reducing_multiplier", "reason": f"{found['reason']}; {search}"}
 
 
+def _consistent(measure: dict[str, Any], theorem: dict[str, Any]) -> dict[str, Any]:
+    """Theorem 1's verdict, never ``none`` beside a proven measure of a system it reduced: for a Chaplygin system
+    with two shape coordinates a measure ρ(q) gives a reducing multiplier (Theorem 1), so the pair would contradict
+    each other; the verdict is then ``undecided``, saying so (it does not happen in the tests: a guard)."""
+    if theorem.get("verdict") != "none" or measure.get("verdict") != "found" or measure.get("at_values"):
+        return theorem
+    return {**theorem, "verdict": "undecided", "reason": (
+        f"Theorem 1 found no multiplier ({theorem.get('reason')}), yet the measure {measure.get('density')} was "
+        "proven, which implies one for a Chaplygin system (Theorem 1's proof): the two disagree, so neither "
+        "'none' is said")}
+
+
 def _integrals(data: LagrangianData) -> tuple[list[FirstIntegral], dict[str, Any]]:
     """The proven integrals of the ansatz besides the energy, as claims checked along the trajectory, and the
     search as JSON. An integral whose form in (q, u) has a denominator that vanishes (powers of the constraints'
@@ -288,7 +300,7 @@ def _assemble(data: LagrangianData, rhs: tuple[sp.Expr, ...], reduce: bool, gene
         if generic and measure.density is not None and summary.get("at_values"):  # found only at the values
             measure = InvariantMeasure(None, f"not claimed: {GENERIC}; {measure.formula}", EQUATION)
             summary = {**summary, "claimed": False}
-        theorem_summary = theorem.summary
+        theorem_summary = _consistent(summary, theorem.summary)
         if generic and form is not None and theorem.summary.get("at_values"):  # found only at the values
             form, reduced_time = None, None
             theorem_summary = {**theorem.summary, "verdict": "not claimed", "reason": GENERIC}

@@ -100,3 +100,14 @@ def test_where_the_search_finds_nothing_the_multiplier_s_measure_is_claimed_with
         values[symbols["J"]] * values[symbols["m"]] / abs(math.cos(theta)), rel=1e-12)
     start = {"x": 0.2, "y": 0.1, "theta": 0.4, "x_dot": 0.46, "theta_dot": 1.7}
     assert _liouville_ratio(SKATE, [density], ["x_dot", "theta_dot"], start, 0.5)[0] == pytest.approx(1.0, abs=1e-7)
+
+
+def test_a_proven_measure_never_stands_beside_theorem_1_s_none():
+    from nonholonomic.systems.lagrangian import _consistent
+
+    theorem = {"verdict": "none", "reason": "the integrability condition fails"}
+    assert _consistent({"verdict": "found", "density": "sin(theta)**2"}, theorem)["verdict"] == "undecided"
+    assert _consistent({"verdict": "none"}, theorem) == theorem
+    assert _consistent({"verdict": "found", "at_values": True}, theorem) == theorem  # the values only: no clash
+    found = {"verdict": "found", "reducing_multiplier": "1"}
+    assert _consistent({"verdict": "found"}, found) == found
