@@ -179,7 +179,9 @@ class StepRecorder:
 def heyoka_template(system: MechanicalSystem, tolerance: float) -> hy.taylor_adaptive:
     """Compile the Taylor integrator of ``system`` (state, then τ if any) at ``tolerance``, once per process."""
     ts = taylor_system(system)
-    return hy.taylor_adaptive(ts.equations, [0.0] * len(ts.variables), pars=[0.0] * ts.n_pars, tol=tolerance)
+    # heyoka sizes the parameters by the highest hy.par the equations use: a parameter only a constant term of L
+    # holds (L = ... + k) is in none, so the vector is not forced to n_pars (issue 34: every such job failed)
+    return hy.taylor_adaptive(ts.equations, [0.0] * len(ts.variables), tol=tolerance)
 
 
 @lru_cache(maxsize=32)
@@ -187,8 +189,7 @@ def heyoka_batch_template(system: MechanicalSystem, tolerance: float, batch_size
     """Compile the batch-mode integrator of ``system`` with ``batch_size`` lanes, once per process."""
     ts = taylor_system(system)
     n = len(ts.variables)
-    return hy.taylor_adaptive_batch(ts.equations, np.zeros((n, batch_size)), pars=np.zeros((ts.n_pars, batch_size)),
-                                    tol=tolerance)
+    return hy.taylor_adaptive_batch(ts.equations, np.zeros((n, batch_size)), tol=tolerance)
 
 
 _per_thread = threading.local()
@@ -338,7 +339,7 @@ def _integrate_heyoka(system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, g
     start = time.perf_counter()
     ta.time = 0.0
     ta.state[:] = ts.initial(y0)
-    ta.pars[:] = ts.runtime_parameters(p)
+    ta.pars[:] = ts.runtime_parameters(p)[: len(ta.pars)]
     times, where = np.unique(grid, return_inverse=True)  # propagate_grid wants increasing times
     recorder = StepRecorder()
     nsteps = 0

@@ -211,7 +211,7 @@ class _BatchRun:
         ta.set_time(0.0)
         self.state[:n] = Y0.T
         self.state[n:] = 0.0  # tau
-        self.pars[:] = pars.T
+        self.pars[:] = pars.T[: self.pars.shape[0]]  # the parameters the equations use (heyoka's count)
         if len(times) == 1:
             out = self.state[None].copy()
             step_t, step_states = [np.zeros(1)] * lanes, [y[None].copy() for y in Y0]
