@@ -26,7 +26,8 @@ import sympy as sp
 from fastapi import APIRouter, Request, Response
 from starlette.concurrency import run_in_threadpool
 
-from nonholonomic.refusals import RefusedField
+from nonholonomic.expressions.overflow import NUMERIC_ERRORS, overflowing_fields
+from nonholonomic.refusals import RefusedField, RefusedFields
 from schemas.problems import OVERLOADED, FieldError
 from schemas.settings import Settings, get_settings
 from schemas.symbolic import (
@@ -239,6 +240,13 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
         return reduce(*args, **kwargs).to_json()
     except RefusedField:
         raise
+    except NUMERIC_ERRORS as exc:  # a numeric check past the float range or the memory: name the field
+        variables = [symbols[n] for n in (*request.coordinates, *request.velocities)]
+        values = {symbols[k]: float(v) for k, v in request.parameters.items()}
+        culprits = overflowing_fields({**parsed, "potential": potential}, variables, values) or [
+            (field, f"evaluating the expressions failed ({type(exc).__name__}): one of them grows too fast to be "
+                    "evaluated or checked") for field in ("L", "a1", "a2", "b")]
+        raise RefusedFields(culprits) from None
     except ValueError as exc:
         raise RefusedField("L", str(exc)) from None
 
