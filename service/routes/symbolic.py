@@ -26,7 +26,7 @@ import sympy as sp
 from fastapi import APIRouter, Request, Response
 from starlette.concurrency import run_in_threadpool
 
-from nonholonomic.expressions.overflow import NUMERIC_ERRORS, overflowing_fields
+from nonholonomic.numerics.overflow import NUMERIC_ERRORS, overflowing_fields
 from nonholonomic.refusals import RefusedField, RefusedFields
 from schemas.problems import OVERLOADED, FieldError
 from schemas.settings import Settings, get_settings
