@@ -12,6 +12,8 @@ i.e. it is regular everywhere.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import sympy as sp
 
 from nonholonomic.lagrangian.equations import dependent_columns, tidy
@@ -24,9 +26,11 @@ __all__ = ["dependent_velocities", "regular_density", "regular_form"]
 MAX_OPS = 400
 
 
-def dependent_velocities(data: LagrangianData) -> tuple[tuple[sp.Symbol, sp.Expr], ...]:
-    """The dependent velocities as functions of (q, u), the columns chosen as the searches choose them."""
-    columns = dependent_columns(data)
+def dependent_velocities(data: LagrangianData, columns: Sequence[int] | None = None,
+                         ) -> tuple[tuple[sp.Symbol, sp.Expr], ...]:
+    """The dependent velocities as functions of (q, u): those of ``columns``, by default the columns the searches
+    choose (:func:`~nonholonomic.lagrangian.equations.dependent_columns`)."""
+    columns = dependent_columns(data) if columns is None else columns
     k = data.A.shape[0]
     if not k or columns is None:
         return ()

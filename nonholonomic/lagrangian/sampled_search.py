@@ -37,6 +37,7 @@ import sympy as sp
 
 from nonholonomic.lagrangian.equations import derive, tidy
 from nonholonomic.lagrangian.parse import LagrangianData
+from nonholonomic.lagrangian.regular_forms import dependent_velocities
 
 __all__ = ["SampledIntegrals", "SampledMeasure", "sampled_integrals", "sampled_measure"]
 
@@ -114,14 +115,7 @@ class _Manifold:
 
     def on_manifold(self) -> tuple[tuple[sp.Symbol, sp.Expr], ...]:
         """The dependent velocities as functions of (q, u), symbolically."""
-        if not self.dep:
-            return ()
-        data = self.data
-        A = sp.Matrix(data.A)
-        k = len(self.dep)
-        solved = A.extract(list(range(k)), self.dep).LUsolve(
-            -A.extract(list(range(k)), self.ind) * sp.Matrix([data.v[j] for j in self.ind]))
-        return tuple((data.v[j], tidy(solved[r])) for r, j in enumerate(self.dep))
+        return dependent_velocities(self.data, self.dep)
 
     def kinetic_determinant_symbolic(self) -> sp.Expr:
         """det(Bᵀ M B) as an expression of q."""
