@@ -67,8 +67,6 @@ class Settings(BaseSettings):
                                     "background) when the API starts; false: at the first request that needs it")
     cache_max_mib: int = Field(512, ge=1, description="size of cache_dir beyond which its least recently used "
                                                       "files are deleted (MiB)")
-    idempotency_lease_s: float = Field(30.0, gt=0, description="seconds an Idempotency-Key stays 'in progress' "
-                                       "unless the API serving it renews it (an API that died frees it then)")
     auth_failures_per_minute: int = Field(20, ge=0, description="requests with an unknown API key one client "
                                           "address may send a minute; beyond: 429 (0: no limit)")
     validation_safety_cap_s: float = Field(

@@ -28,6 +28,7 @@ from schemas.problems import OVERLOADED, QUEUE_FULL, FieldError
 from schemas.settings import Settings
 from service.backends.base import JobBackend, JobRecord, QueueFull
 from service.errors import ProblemError, invalid_request
+from store.idempotency import KeyBinding
 from store.jobs import ActiveBoundReached
 
 #: Seconds assumed for a request before any has finished (for ``Retry-After``).
@@ -126,17 +127,19 @@ def _admitted(backend: JobBackend, owner: str | None, settings: Settings, messag
         raise _too_many_jobs(exc.active, settings) from None
 
 
-def admit_job(backend: JobBackend, owner: str | None, settings: Settings, body: dict[str, Any]) -> JobRecord:
+def admit_job(backend: JobBackend, owner: str | None, settings: Settings, body: dict[str, Any],
+              binding: KeyBinding | None = None) -> JobRecord:
     """Admit and submit a job (or a paper report) of ``owner``'s key: a 429 problem with ``Retry-After``
-    if the key has ``max_active_jobs_per_key`` active jobs or the queue is full, else the queued job."""
+    if the key has ``max_active_jobs_per_key`` active jobs or the queue is full, else the queued job (its
+    Idempotency-Key's ``binding`` recorded with it)."""
     with _admitted(backend, owner, settings, 1, adds_a_job=True) as max_active:
-        return backend.submit(body, owner, max_active=max_active)
+        return backend.submit(body, owner, max_active=max_active, binding=binding)
 
 
 def admit_ensemble(backend: JobBackend, owner: str | None, settings: Settings, spec: dict[str, Any],
-                   chunks: list[tuple[int, int]]) -> str:
+                   chunks: list[tuple[int, int]], binding: KeyBinding | None = None) -> str:
     """Admit and submit an ensemble: its chunks count against ``max_queued_messages`` (all of them fit
     with what is queued, or a 429 problem with ``Retry-After``); returns the ensemble's id."""
     with _admitted(backend, owner, settings, len(chunks), adds_a_job=False):
-        ensemble_id, _ = backend.submit_ensemble(spec, chunks, owner)
+        ensemble_id, _ = backend.submit_ensemble(spec, chunks, owner, binding)
     return ensemble_id

@@ -24,7 +24,6 @@ from service.access import Access, caller
 from service.admission import SymbolicPool
 from service.backends import make_backend
 from service.errors import install_error_handlers, problem_responses
-from service.idempotency import idempotency_store
 from service.isolated import start_fork_server
 from service.limits import BodyLimit
 from service.routes import (
@@ -65,7 +64,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             start_fork_server()  # for the symbolic requests' child processes (in the background)
         app.state.symbolic_pool = SymbolicPool(chosen.symbolic_workers, chosen.symbolic_queue)
         app.state.backend = make_backend(chosen)
-        app.state.idempotency = idempotency_store(app.state.backend, chosen.job_ttl_s)
         try:
             yield
         finally:

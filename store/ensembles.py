@@ -13,10 +13,12 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import Engine, delete, exists, insert, or_, select, update
+from sqlalchemy import Engine, and_, delete, exists, insert, or_, select, update
 from sqlalchemy.orm import sessionmaker
 
 from store.expiry import Expiry
+from store.idempotency import KeyBinding, bind, unbind
+from store.jobs import UNSENT_GRACE_S
 from store.models import EnsembleChunkRow, EnsembleRow
 from store.statements import autocommit, changed_one
 
@@ -35,10 +37,16 @@ class EnsembleStore:
     # -- writing ---------------------------------------------------------------------------------
 
     def create(self, ensemble_id: str, request: dict[str, Any], chunks: list[tuple[int, int]],
-               owner: str | None = None, queue: str | None = None, broker_epoch: str | None = None) -> str:
-        """Record an ensemble and its chunks, none started; returns its ``created_at`` (ISO 8601, UTC)."""
+               owner: str | None = None, queue: str | None = None, broker_epoch: str | None = None,
+               binding: KeyBinding | None = None) -> str:
+        """Record an ensemble and its chunks, none started (``broker_epoch`` None: not sent yet, see
+        :meth:`mark_sent`); returns its ``created_at`` (ISO 8601, UTC). With ``binding`` the
+        Idempotency-Key is bound to it in the same transaction (:func:`store.idempotency.bind`, which
+        raises, nothing recorded, if it cannot be)."""
         now = datetime.now(UTC)
         with self._session.begin() as session:
+            if binding is not None:
+                bind(session.connection(), binding, ensemble_id, now.timestamp())
             session.add(EnsembleRow(id=ensemble_id, owner=owner, request=request,
                                     chunks=[list(c) for c in chunks], created=now.timestamp(),
                                     created_at=now.isoformat(), cancelled=False, queue=queue,
@@ -50,11 +58,20 @@ class EnsembleStore:
         self._expiry.now_and_then(now.timestamp())
         return now.isoformat()
 
-    def delete(self, ensemble_id: str) -> None:
-        """Forget an ensemble whose chunks could not be sent (the broker refused them)."""
+    def delete(self, ensemble_id: str, slot: str | None = None) -> None:
+        """Forget an ensemble whose chunks could not be sent (the broker refused them), and free the
+        Idempotency-Key ``slot`` bound to it, in one transaction."""
         with self._session.begin() as session:
             session.execute(delete(EnsembleChunkRow).where(EnsembleChunkRow.ensemble_id == ensemble_id))
             session.execute(delete(EnsembleRow).where(EnsembleRow.id == ensemble_id))
+            if slot is not None:
+                unbind(session.connection(), slot, ensemble_id)
+
+    def mark_sent(self, ensemble_id: str, broker_epoch: str) -> None:
+        """Its chunks' messages are in the broker (as :meth:`store.jobs.JobStore.mark_sent`)."""
+        changed_one(self._autocommit, update(EnsembleRow).where(EnsembleRow.id == ensemble_id,
+                                                                EnsembleRow.broker_epoch.is_(None))
+                    .values(broker_epoch=broker_epoch))
 
     def cancel(self, ensemble_id: str) -> None:
         changed_one(self._autocommit, update(EnsembleRow).where(EnsembleRow.id == ensemble_id).values(cancelled=True))
@@ -169,13 +186,16 @@ class EnsembleStore:
                                         .where(EnsembleRow.cancelled.is_(False), _PENDING)
                                         .order_by(EnsembleRow.created, EnsembleRow.id)))
 
-    def sent_before(self, broker_epoch: str, limit: int = 1000) -> list[tuple[str, str | None, str | None]]:
+    def sent_before(self, broker_epoch: str, limit: int = 1000,
+                    grace_s: float = UNSENT_GRACE_S) -> list[tuple[str, str | None, str | None]]:
         """Unfinished ensembles whose chunks were sent in another broker epoch (those messages are
-        gone): (id, queue, epoch)."""
+        gone), or not sent ``grace_s`` after their creation (their API died first): (id, queue, epoch)."""
+        unsent_before = datetime.now(UTC).timestamp() - grace_s
         with self._session() as session:
             rows = session.execute(select(EnsembleRow.id, EnsembleRow.queue, EnsembleRow.broker_epoch)
                                    .where(EnsembleRow.cancelled.is_(False), _PENDING,
-                                          or_(EnsembleRow.broker_epoch.is_(None),
+                                          or_(and_(EnsembleRow.broker_epoch.is_(None),
+                                                   EnsembleRow.created < unsent_before),
                                               EnsembleRow.broker_epoch != broker_epoch))
                                    .order_by(EnsembleRow.created).limit(limit))
             return [(ensemble_id, queue, epoch) for ensemble_id, queue, epoch in rows]

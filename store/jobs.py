@@ -21,6 +21,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, sessionmaker
 
 from store.expiry import Expiry
+from store.idempotency import KeyBinding, KeyBound, KeyInProgress, bind, delete_expired as delete_expired_keys, unbind
 from store.models import JobRow
 from store.statements import autocommit, changed_one
 
@@ -34,6 +35,10 @@ ENDED = ("succeeded", "failed", "cancelled")
 #: First key of the PostgreSQL advisory locks that serialize one owner's admissions (the second is the
 #: owner's CRC-32): two owners sharing a CRC only wait for each other.
 OWNER_LOCK_CLASS = 726458
+#: Seconds after its creation a job not sent yet (:meth:`JobStore.mark_sent`) is taken as lost by its API
+#: and sent by the workers' sweep: far longer than recording and sending take, so a job in between is not
+#: sent twice (a second message would only be dropped by the worker that gets it).
+UNSENT_GRACE_S = 30.0
 #: The columns of a job read without its result (lists, resumption).
 _WITHOUT_RESULT = (JobRow.id, JobRow.status, JobRow.request, JobRow.created_at, JobRow.created, JobRow.owner,
                    JobRow.error, JobRow.attempts)
@@ -166,42 +171,53 @@ class JobStore:
         return changed_one(self._autocommit, statement)
 
     def create(self, job_id: str, request: dict[str, Any], owner: str | None = None, queue: str | None = None,
-               broker_epoch: str | None = None, max_active: int | None = None) -> str:
-        """Record a queued job (sent to ``queue`` in the broker's ``broker_epoch``); returns its
-        ``created_at`` (ISO 8601, UTC).
+               broker_epoch: str | None = None, max_active: int | None = None,
+               binding: KeyBinding | None = None) -> str:
+        """Record a queued job (sent to ``queue`` in the broker's ``broker_epoch``; None: not sent yet, see
+        :meth:`mark_sent`); returns its ``created_at`` (ISO 8601, UTC).
 
         With ``max_active`` (and an ``owner``) the job is recorded only if the owner has fewer queued
         or running jobs: the count and the insert run in one transaction under the owner's advisory
         lock (PostgreSQL), so concurrent submissions of one owner, from any number of API processes,
         cannot both see room for one more. Raises :class:`ActiveBoundReached` otherwise.
+
+        With ``binding`` the Idempotency-Key is bound to the job in the same transaction
+        (:func:`store.idempotency.bind`): raises :class:`store.idempotency.KeyBound` or
+        :class:`store.idempotency.KeyInProgress` (nothing recorded) if it cannot be.
         """
         now = _now()
         row = insert(_JOBS).values(id=job_id, owner=owner, status="queued", request=request, created=now.timestamp(),
                                    created_at=now.isoformat(), attempts=0, queue=queue, broker_epoch=broker_epoch)
-        if max_active is None or owner is None:
+        bounded = max_active is not None and owner is not None
+        if not bounded and binding is None:
             self._changed(row)
         else:
-            self._create_bounded(row, owner, max_active)
+            self._create_in_transaction(row, job_id, now.timestamp(), owner if bounded else None, max_active,
+                                        binding)
         self._expiry.now_and_then(now.timestamp())
         return now.isoformat()
 
-    def _create_bounded(self, row: Any, owner: str, max_active: int) -> None:
-        # The lock is the transaction's: released by its commit or rollback, or when the connection
+    def _create_in_transaction(self, row: Any, job_id: str, created: float, owner: str | None,
+                               max_active: int | None, binding: KeyBinding | None) -> None:
+        # The locks are the transaction's: released by its commit or rollback, or when the connection
         # dies with the API process (no lease to outlive it). On SQLite (one embedded API process) the
         # caller's process lock does this job.
         with self.engine.connect() as connection:
             try:
                 with connection.begin():
-                    if connection.dialect.name == "postgresql":
-                        first, second = owner_lock_key(owner)
-                        connection.execute(text("SELECT pg_advisory_xact_lock(:first, :second)"),
-                                           {"first": first, "second": second})
-                    active = int(connection.scalar(select(func.count()).select_from(_JOBS).where(
-                        _JOBS.c.owner == owner, _JOBS.c.status.in_(ACTIVE))) or 0)
-                    if active >= max_active:
-                        raise ActiveBoundReached(active)
+                    if binding is not None:
+                        bind(connection, binding, job_id, created)
+                    if owner is not None and max_active is not None:
+                        if connection.dialect.name == "postgresql":
+                            first, second = owner_lock_key(owner)
+                            connection.execute(text("SELECT pg_advisory_xact_lock(:first, :second)"),
+                                               {"first": first, "second": second})
+                        active = int(connection.scalar(select(func.count()).select_from(_JOBS).where(
+                            _JOBS.c.owner == owner, _JOBS.c.status.in_(ACTIVE))) or 0)
+                        if active >= max_active:
+                            raise ActiveBoundReached(active)
                     connection.execute(row)
-            except ActiveBoundReached:
+            except (ActiveBoundReached, KeyBound, KeyInProgress):
                 raise
             except BaseException:
                 connection.invalidate()  # as store.statements.changed_one: never pool a busy connection
@@ -219,9 +235,20 @@ class JobStore:
             return False
         return True
 
-    def delete(self, job_id: str) -> None:
-        """Forget a job that could not be sent (the broker refused it)."""
-        self._changed(delete(_JOBS).where(_JOBS.c.id == job_id, _JOBS.c.status == "queued"))
+    def delete(self, job_id: str, slot: str | None = None) -> None:
+        """Forget a job that could not be sent (the broker refused it), and free the Idempotency-Key
+        ``slot`` bound to it, in one transaction."""
+        with self.engine.begin() as connection:
+            connection.execute(delete(_JOBS).where(_JOBS.c.id == job_id, _JOBS.c.status == "queued"))
+            if slot is not None:
+                unbind(connection, slot, job_id)
+
+    def mark_sent(self, job_id: str, broker_epoch: str) -> None:
+        """The job's message is in the broker (epoch ``broker_epoch``). Until this is recorded the job
+        is "not sent yet"; one still so :data:`UNSENT_GRACE_S` after its creation was recorded by an
+        API that died before sending it, and the workers' sweep sends it (:meth:`sent_before`)."""
+        self._changed(update(_JOBS).where(_JOBS.c.id == job_id, _JOBS.c.broker_epoch.is_(None))
+                      .values(broker_epoch=broker_epoch))
 
     def start(self, job_id: str, worker: str) -> bool:
         """Mark the job running on ``worker`` if it is queued, or was running on that same worker (its
@@ -262,13 +289,17 @@ class JobStore:
         return self._changed(update(_JOBS).where(_JOBS.c.id == job_id, _JOBS.c.status == "queued", epoch)
                              .values(broker_epoch=broker_epoch))
 
-    def sent_before(self, broker_epoch: str,
-                    limit: int = 1000) -> list[tuple[str, dict[str, Any], str | None, str | None]]:
-        """Queued jobs sent in another broker epoch (their messages are gone): (id, request, queue, epoch)."""
+    def sent_before(self, broker_epoch: str, limit: int = 1000,
+                    grace_s: float = UNSENT_GRACE_S) -> list[tuple[str, dict[str, Any], str | None, str | None]]:
+        """Queued jobs sent in another broker epoch (their messages are gone), and those not sent
+        ``grace_s`` after their creation (their API died between recording and sending them):
+        (id, request, queue, epoch)."""
+        unsent_before = _now().timestamp() - grace_s
         with self._session() as session:
             rows = session.execute(select(JobRow.id, JobRow.request, JobRow.queue, JobRow.broker_epoch)
                                    .where(JobRow.status == "queued",
-                                          or_(JobRow.broker_epoch.is_(None), JobRow.broker_epoch != broker_epoch))
+                                          or_(and_(JobRow.broker_epoch.is_(None), JobRow.created < unsent_before),
+                                              JobRow.broker_epoch != broker_epoch))
                                    .order_by(JobRow.created).limit(limit))
             return [tuple(row) for row in rows]
 
@@ -286,6 +317,7 @@ class JobStore:
         with self._session.begin() as session:
             done = cast("CursorResult[Any]",  # a DELETE's result (typed Result): it has the rowcount
                         session.execute(delete(JobRow).where(JobRow.created < horizon, JobRow.status.in_(ENDED))))
+            delete_expired_keys(session.connection(), horizon)
             return int(done.rowcount)
 
     # -- reading ---------------------------------------------------------------------------------

@@ -86,3 +86,21 @@ class EnsembleChunkRow(Base):
     digests: Mapped[list[dict[str, Any]] | None] = mapped_column(Document, nullable=True)
 
     __table_args__ = (Index("ix_ensemble_chunks_pending", "ensemble_id", "done"),)
+
+
+class IdempotencyKeyRow(Base):
+    """An ``Idempotency-Key`` bound to what its first request created: written in the same transaction as
+    that job or ensemble (:mod:`store.idempotency`), so a key can never make two, whatever process dies when.
+
+    ``slot`` is ``owner:key`` (``-:key`` when keys are off); ``fingerprint`` the SHA-256 of the request's
+    path and canonical body; ``resource`` the job's or ensemble's id.
+    """
+
+    __tablename__ = "idempotency_keys"
+
+    slot: Mapped[str] = mapped_column(String(400), primary_key=True)
+    fingerprint: Mapped[str] = mapped_column(String(64))
+    resource: Mapped[str] = mapped_column(String(64))
+    created: Mapped[float] = mapped_column(Float)
+
+    __table_args__ = (Index("ix_idempotency_keys_created", "created"),)

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
 from store.ensembles import EnsembleStore
+from store.idempotency import IdempotencyKeys, KeyBinding
 
 if TYPE_CHECKING:
     import redis
@@ -77,17 +78,21 @@ class JobBackend(Protocol):
     mode: str
     #: Where ensembles' records and member results live.
     ensembles: EnsembleStore
+    #: The Idempotency-Keys bound to jobs and ensembles (in the job store's database).
+    keys: IdempotencyKeys
 
     # Read-only (a property): embedded declares it None, queue a redis.Redis (a mutable attribute is invariant).
     @property
     def redis(self) -> redis.Redis | None:
-        """The Redis every API process shares (queue mode: idempotency keys live there), None in embedded mode."""
+        """The Redis every API process shares (queue mode), None in embedded mode."""
 
     def submit(self, request: dict[str, Any], owner: str | None = None,
-               max_active: int | None = None) -> JobRecord:
+               max_active: int | None = None, binding: KeyBinding | None = None) -> JobRecord:
         """Accept a validated request (of ``owner``'s key); returns the queued job. With ``max_active``,
         the owner's active jobs are counted and the job recorded in one atomic step: raises
-        :class:`store.jobs.ActiveBoundReached` (nothing recorded) when the owner has ``max_active`` already."""
+        :class:`store.jobs.ActiveBoundReached` (nothing recorded) when the owner has ``max_active`` already.
+        With ``binding``, its Idempotency-Key is bound to the job in the job's transaction: raises
+        :class:`store.idempotency.KeyBound` or :class:`store.idempotency.KeyInProgress` (nothing recorded)."""
 
     def reserve_messages(self, messages: int, bound: int) -> AbstractContextManager[None]:
         """Hold room for ``messages`` more in the queue while the body sends them (at most ``bound`` queued
@@ -114,8 +119,9 @@ class JobBackend(Protocol):
         """
 
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
-                        owner: str | None = None) -> tuple[str, str]:
-        """Record a validated ensemble and send its chunks to the workers; returns (id, created_at)."""
+                        owner: str | None = None, binding: KeyBinding | None = None) -> tuple[str, str]:
+        """Record a validated ensemble and send its chunks to the workers; returns (id, created_at). With
+        ``binding``, as :meth:`submit`."""
 
     def cancel_ensemble(self, ensemble_id: str) -> None:
         """Stop every chunk: queued ones never start, running ones stop at their next progress report."""

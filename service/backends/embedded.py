@@ -26,6 +26,7 @@ from schemas.settings import Settings
 from service.backends.base import JobRecord, QueueFull, decode_cursor, encode_cursor
 from service.backends.job_threads import JobThreads
 from store.ensembles import EnsembleStore
+from store.idempotency import IdempotencyKeys, KeyBinding
 from store.jobs import ActiveBoundReached, JobStore, StoredJob
 from workers.ensembles import run_ensemble_chunk
 from workers.jobs import WarmUp, run_job, warm_up
@@ -71,7 +72,6 @@ class EmbeddedBackend:
     """
 
     mode = "embedded"
-    #: Idempotency keys live in the API process (one API process: nothing to share).
     redis = None
 
     def __init__(self, settings: Settings) -> None:
@@ -87,6 +87,7 @@ class EmbeddedBackend:
         self._running: dict[str, _Running] = {}
         self._pool = JobThreads(self._threads, "nonholonomic-job")
         self.ensembles = EnsembleStore(self.store.engine, settings.job_ttl_s)
+        self.keys = IdempotencyKeys(self.store.engine)
         self._closing = threading.Event()
         threading.Thread(target=self._watch, daemon=True, name="nonholonomic-job-watchdog").start()
         self._warm = threading.Event()
@@ -117,14 +118,14 @@ class EmbeddedBackend:
         self._pool.submit(self._run, job_id)
 
     def submit(self, request: dict[str, Any], owner: str | None = None,
-               max_active: int | None = None) -> JobRecord:
+               max_active: int | None = None, binding: KeyBinding | None = None) -> JobRecord:
         job_id = str(uuid.uuid4())
         with self._admission:
             if max_active is not None and owner is not None:
                 active = self.store.active_count(owner)
                 if active >= max_active:
                     raise ActiveBoundReached(active)
-            created_at = self.store.create(job_id, request, owner)
+            created_at = self.store.create(job_id, request, owner, binding=binding)
         self._enqueue(job_id)
         return JobRecord(job_id, "queued", 0.0, created_at, request, owner=owner)
 
@@ -218,9 +219,9 @@ class EmbeddedBackend:
             self._progress.pop(job_id, None)
 
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
-                        owner: str | None = None) -> tuple[str, str]:
+                        owner: str | None = None, binding: KeyBinding | None = None) -> tuple[str, str]:
         ensemble_id = str(uuid.uuid4())
-        created_at = self.ensembles.create(ensemble_id, request, chunks, owner)
+        created_at = self.ensembles.create(ensemble_id, request, chunks, owner, binding=binding)
         for chunk in range(len(chunks)):
             self._enqueue_chunk(ensemble_id, chunk)
         return ensemble_id, created_at

@@ -31,6 +31,7 @@ from sqlalchemy import create_engine, text
 from schemas.settings import Settings
 from service.backends.base import JobRecord, QueueFull, decode_cursor, encode_cursor
 from store.ensembles import EnsembleStore
+from store.idempotency import IdempotencyKeys, KeyBinding
 from store.jobs import JobStore, StoredJob
 from workers.broker_messages import (
     parse_task_message,
@@ -96,6 +97,7 @@ class QueueBackend:
         self.store.migrate()
         self._epoch: tuple[str, float] | None = None
         self.ensembles = EnsembleStore(self.store.engine, settings.job_ttl_s)
+        self.keys = IdempotencyKeys(self.store.engine)
         # /health answers within its deadline even when Redis does not
         self._health_redis = redis.Redis.from_url(settings.redis_url or "", socket_timeout=HEALTH_TIMEOUT_S,
                                                   socket_connect_timeout=HEALTH_TIMEOUT_S)
@@ -107,20 +109,25 @@ class QueueBackend:
         self._seen: OrderedDict[int, None] = OrderedDict()  # hashes of broker messages already looked at
         self._seen_lock = threading.Lock()
 
-    def submit(self, request: dict[str, Any], owner: str | None = None, max_active: int | None = None) -> JobRecord:
-        """Record the job, then send it; if the broker refuses, the record is removed and the error
-        raised (a 503: nothing was accepted). With ``max_active``, raises
+    def submit(self, request: dict[str, Any], owner: str | None = None, max_active: int | None = None,
+               binding: KeyBinding | None = None) -> JobRecord:
+        """Record the job (with its Idempotency-Key's ``binding``, in one transaction), send it, then
+        mark it sent: an API that dies between the two leaves a job the workers' sweep sends
+        (:meth:`store.jobs.JobStore.mark_sent`). If the broker refuses, the record and its key are removed
+        and the error raised (a 503: nothing was accepted). With ``max_active``, raises
         :class:`store.jobs.ActiveBoundReached` (nothing recorded) if ``owner`` has that many active jobs."""
         job_id = str(uuid.uuid4())
-        created_at = self.store.create(job_id, request, owner, self.settings.queue, self._broker_epoch(), max_active)
+        epoch = self._broker_epoch()
+        created_at = self.store.create(job_id, request, owner, self.settings.queue, None, max_active, binding)
         try:
             # ignore_result: the result goes to the job store, so the API does not subscribe to the task's
             # result channel; argsrepr: the logs and events name the job instead of writing out the request
             simulate_job.apply_async(args=[request], task_id=job_id, queue=self.settings.queue, retry=False,
                                      ignore_result=True, argsrepr=_argsrepr(request), kwargsrepr="{}")
         except Exception:
-            self.store.delete(job_id)
+            self.store.delete(job_id, binding.slot if binding is not None else None)
             raise
+        self.store.mark_sent(job_id, epoch)
         return JobRecord(job_id, "queued", 0.0, created_at, request, owner=owner)
 
     def _broker_epoch(self) -> str:
@@ -249,19 +256,21 @@ class QueueBackend:
                 pass
 
     def submit_ensemble(self, request: dict[str, Any], chunks: list[tuple[int, int]],
-                        owner: str | None = None) -> tuple[str, str]:
-        """Record the ensemble, then send its chunks; if the broker refuses, the record is removed and
-        the error raised (a 503: nothing was accepted)."""
+                        owner: str | None = None, binding: KeyBinding | None = None) -> tuple[str, str]:
+        """Record the ensemble (with its key's ``binding``), send its chunks, mark it sent (as
+        :meth:`submit`); if the broker refuses, the record and its key are removed and the error raised
+        (a 503: nothing was accepted)."""
         ensemble_id = str(uuid.uuid4())
-        created_at = self.ensembles.create(ensemble_id, request, chunks, owner, self.settings.queue,
-                                           self._broker_epoch())
+        epoch = self._broker_epoch()
+        created_at = self.ensembles.create(ensemble_id, request, chunks, owner, self.settings.queue, None, binding)
         try:
             group(ensemble_chunk.si(ensemble_id, i).set(task_id=chunk_task_id(ensemble_id, i),
                                                         queue=self.settings.queue)
                   for i in range(len(chunks))).apply_async(retry=False)
         except Exception:
-            self.ensembles.delete(ensemble_id)
+            self.ensembles.delete(ensemble_id, binding.slot if binding is not None else None)
             raise
+        self.ensembles.mark_sent(ensemble_id, epoch)
         return ensemble_id, created_at
 
     def cancel_ensemble(self, ensemble_id: str) -> None:

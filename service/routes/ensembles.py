@@ -24,6 +24,7 @@ from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses,
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
 from service.validation import POOL_FULL, validated
+from store.idempotency import KeyBinding
 
 #: Operation ids are explicit, ``ensembles-<verb>``; a route without one gets ``ensembles-<its name>``.
 router = APIRouter(prefix="/v1/ensembles", tags=["ensembles"], generate_unique_id_function=operation_id)
@@ -47,14 +48,16 @@ async def submit_ensemble(body: EnsembleRequest, request: Request, backend: Back
         body.members.grid.ranges = [list(r) for r in await run_in_threadpool(body.grid_ranges)]
     spec = body.model_dump(mode="json")
 
-    def create() -> tuple[dict[str, Any], dict[str, str]]:
-        ensemble_id = admit_ensemble(backend, owner, settings, spec, chunks)
+    def create(binding: KeyBinding | None) -> str:
+        return admit_ensemble(backend, owner, settings, spec, chunks, binding)
+
+    def respond(ensemble_id: str) -> tuple[dict[str, Any], dict[str, str]]:
         location = f"/v1/ensembles/{ensemble_id}"
         accepted = EnsembleAccepted(id=ensemble_id, status="queued", location=location, members=body.members.count,
                                     chunks=len(chunks), deprecations=body.deprecations())
         return accepted.model_dump(), {"Location": location}
 
-    return await run_in_threadpool(idempotent, request, owner, spec, create)
+    return await run_in_threadpool(idempotent, request, owner, spec, create, respond)
 
 
 @router.get("/{ensemble_id}", operation_id="ensembles-get", response_model=EnsembleView, responses=_ERRORS,

@@ -40,6 +40,7 @@ from service.exports import (
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
 from service.validation import POOL_FULL, validated
+from store.idempotency import KeyBinding
 
 #: Operation ids are explicit, ``jobs-<verb>``; a route without one gets ``jobs-<its name>``.
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"], generate_unique_id_function=operation_id)
@@ -70,13 +71,15 @@ async def submit_job(job: JobRequest, request: Request, backend: Backend, owner:
     await validated(request, "job", job)
     body = job.model_dump(mode="json")
 
-    def create() -> tuple[dict[str, Any], dict[str, str]]:
-        record = admit_job(backend, owner, settings, body)
-        location = f"/v1/jobs/{record.id}"
-        accepted = JobAccepted(id=record.id, status="queued", location=location, deprecations=job.deprecations())
+    def create(binding: KeyBinding | None) -> str:
+        return admit_job(backend, owner, settings, body, binding).id
+
+    def respond(job_id: str) -> tuple[dict[str, Any], dict[str, str]]:
+        location = f"/v1/jobs/{job_id}"
+        accepted = JobAccepted(id=job_id, status="queued", location=location, deprecations=job.deprecations())
         return accepted.model_dump(), {"Location": location}
 
-    return await run_in_threadpool(idempotent, request, owner, body, create)
+    return await run_in_threadpool(idempotent, request, owner, body, create, respond)
 
 
 @router.get("/{job_id}", operation_id="jobs-get", response_model=JobView, responses=_ERRORS,

@@ -17,6 +17,7 @@ from service.errors import UNAVAILABLE_BACKEND, ProblemError, invalid_request, p
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.openapi import operation_id
 from service.routes.pages import report_html
+from store.idempotency import KeyBinding
 
 #: Operation ids: ``paper-<verb>``.
 router = APIRouter(prefix="/v1/paper", tags=["paper report"], generate_unique_id_function=operation_id)
@@ -44,14 +45,15 @@ def submit_report(request: Request, backend: Backend, owner: Owner, settings: Ap
         raise invalid_request([FieldError(field=f, reason=r) for f, r in problems])
     spec = job.model_dump(mode="json")
 
-    def create() -> tuple[dict[str, Any], dict[str, str]]:
-        record = admit_job(backend, owner, settings, spec)
-        location = f"/v1/jobs/{record.id}"
-        return (JobAccepted(id=record.id, status="queued", location=location).model_dump(),
-                {"Location": location,
-                 "Link": f'</v1/paper/report/{record.id}>; rel="alternate"; type="text/html"'})
+    def create(binding: KeyBinding | None) -> str:
+        return admit_job(backend, owner, settings, spec, binding).id
 
-    return idempotent(request, owner, spec, create)
+    def respond(job_id: str) -> tuple[dict[str, Any], dict[str, str]]:
+        location = f"/v1/jobs/{job_id}"
+        return (JobAccepted(id=job_id, status="queued", location=location).model_dump(),
+                {"Location": location, "Link": f'</v1/paper/report/{job_id}>; rel="alternate"; type="text/html"'})
+
+    return idempotent(request, owner, spec, create, respond)
 
 
 @router.get("/report/{job_id}", operation_id="paper-report-page", response_class=HTMLResponse,

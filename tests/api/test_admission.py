@@ -1,8 +1,8 @@
 """Admission in embedded mode, in-process (issue 19): an ensemble counts its chunks against the queue's
 bound, one whose chunks alone exceed it is a cheap 422; failed authentication is rate limited per client
 address; an unknown job or ensemble id and another key's answer alike, after the same database work; an
-Idempotency-Key in progress holds a lease. Queue mode: tests/integration/test_admission_races.py and
-test_idempotency_lease.py."""
+Idempotency-Key is bound with its job in one transaction. Queue mode: tests/integration/test_admission_races.py
+and test_idempotency_crash.py."""
 
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ from fastapi.testclient import TestClient
 from sqlalchemy import event
 
 from schemas.settings import get_settings
-from service.idempotency import MemoryIdempotencyStore
 from service.main import create_app
 from tests.api.conftest import BALL, STATE, job
 
@@ -24,9 +23,6 @@ LONG = job(t_final=1e8, samples=2)
 #: Hang guard (seconds) of each wait for a job's status: far above the few seconds a quiet machine needs
 #: (the first job compiles its integrator), never a result.
 GUARD_S = 300.0
-#: The lease of the renewed claim below: renewed every third of it, so a renewal may come up to two thirds
-#: of it late (a loaded machine) and the claim still holds.
-RENEWED_LEASE_S = 1.0
 
 
 def _until_status(client: TestClient, location: str, status: str) -> None:
@@ -182,20 +178,31 @@ def test_an_unknown_and_a_foreign_ensemble_id_answer_alike_after_the_same_work(a
     assert client.get(foreign, headers=A).status_code == 200
 
 
-def test_an_idempotency_key_in_progress_is_free_again_after_its_lease_unless_renewed():
-    store = MemoryIdempotencyStore(ttl_s=3600)
-    assert store.claim("alice:k", "f", "t1", lease_s=0.2) is None
-    assert store.claim("alice:k", "f", "t2", lease_s=0.2)["response"] is None  # in progress: a 409
-    time.sleep(0.3)  # nobody renewed it (its API died)
-    assert store.claim("alice:k", "f", "t3", lease_s=RENEWED_LEASE_S) is None  # free again: t3's now
-    store.leases.hold("alice:k", "t3", RENEWED_LEASE_S)  # served longer than its lease: renewed
+def test_an_idempotency_key_is_bound_with_its_job_in_one_transaction_or_not_at_all(tmp_path):
+    """SQLite (embedded): the key's row commits or rolls back with the job's; a second binding finds the first."""
+    from store.idempotency import KeyBinding, KeyBound
+    from store.jobs import ActiveBoundReached, JobStore
+
+    store = JobStore(f"sqlite:///{tmp_path / 'jobs.db'}", ttl_s=3600)
+    store.migrate()
     try:
-        time.sleep(1.5 * RENEWED_LEASE_S)
-        assert store.claim("alice:k", "f", "t4", lease_s=0.2) is not None
+        store.create("job-1", {"a": 1}, "alice", binding=KeyBinding("alice:k", "f1"))
+        with pytest.raises(KeyBound) as bound:
+            store.create("job-2", {"a": 1}, "alice", binding=KeyBinding("alice:k", "f1"))
+        assert (bound.value.fingerprint, bound.value.resource) == ("f1", "job-1")
+        assert store.get("job-2") is None  # nothing recorded beside the refused binding
+        with pytest.raises(ActiveBoundReached):  # refused after binding: the binding rolls back with it
+            store.create("job-3", {"a": 3}, "alice", max_active=1, binding=KeyBinding("alice:other", "f3"))
+        assert store.get("job-3") is None
+        assert store_keys(store).bound("alice:other") is None
+        assert store_keys(store).bound("alice:k") == ("f1", "job-1")
+        store.delete("job-1", "alice:k")  # the broker refused it: job and key go together
+        assert store.get("job-1") is None and store_keys(store).bound("alice:k") is None
     finally:
-        store.leases.drop("t3")
-    store.release("alice:k", "t4")  # not t4's claim: nothing freed
-    assert store.claim("alice:k", "f", "t5", lease_s=0.2) is not None
-    store.complete("alice:k", "f", {"content": {}, "headers": {}})
-    time.sleep(RENEWED_LEASE_S + 0.1)  # past the lease it had
-    assert store.claim("alice:k", "f", "t6", lease_s=0.2)["response"] is not None  # an answer keeps the long TTL
+        store.close()
+
+
+def store_keys(store):
+    from store.idempotency import IdempotencyKeys
+
+    return IdempotencyKeys(store.engine)

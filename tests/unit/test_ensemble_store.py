@@ -86,3 +86,29 @@ def test_a_refused_ensemble_is_forgotten(store):
     store.create("e", REQUEST, CHUNKS)
     store.delete("e")
     assert store.record("e") is None and store.pending_chunks("e") == []
+
+
+def test_work_an_api_recorded_but_did_not_send_is_found_by_the_sweep_after_its_grace(store):
+    """An API that died between recording and sending leaves ``broker_epoch`` None (issue 34, item 1): the
+    sweep's query finds such a job or ensemble once it is older than the grace, never while it is being sent."""
+    from store.idempotency import IdempotencyKeys, KeyBinding
+
+    jobs = JobStore(str(store.engine.url.render_as_string(hide_password=False)), ttl_s=3600)
+    try:
+        jobs.create("job-unsent", REQUEST, "alice", queue="q", binding=KeyBinding("alice:k1", "f"))
+        jobs.create("job-sent", REQUEST, "alice", queue="q")
+        jobs.mark_sent("job-sent", "one")
+        assert jobs.sent_before("one") == []  # within the grace: its API may be sending it now
+        assert [row[0] for row in jobs.sent_before("one", grace_s=-1.0)] == ["job-unsent"]
+        jobs.mark_sent("job-unsent", "one")
+        assert jobs.sent_before("one", grace_s=-1.0) == []
+        store.create("e-unsent", REQUEST, CHUNKS, queue="q", binding=KeyBinding("alice:k2", "f"))
+        assert store.sent_before("one") == [] and [r[0] for r in store.sent_before("one", grace_s=-1.0)] == ["e-unsent"]
+        store.mark_sent("e-unsent", "one")
+        assert store.sent_before("one", grace_s=-1.0) == []
+        keys = IdempotencyKeys(store.engine)
+        assert keys.bound("alice:k2") == ("f", "e-unsent")
+        store.delete("e-unsent", "alice:k2")  # refused by the broker: the key is free with it
+        assert keys.bound("alice:k2") is None and keys.bound("alice:k1") == ("f", "job-unsent")
+    finally:
+        jobs.close()
