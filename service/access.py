@@ -8,8 +8,13 @@ and another key gets a 404 for it, as for an id that does not exist. Jobs sent s
 broker (no owner) are visible to every key. ``/health``, ``/docs`` and ``/openapi.json`` need no key.
 
 Guessing keys is rate limited: a client address that sent ``auth_failures_per_minute`` unknown keys
-gets a 429 with ``Retry-After`` for every request with a key, right or wrong, until its bucket refills
-(so a guess answers nothing while it is limited). Behind a reverse proxy the address is the proxy's
+gets a 429 with ``Retry-After`` for every request with a key it has not used successfully from that
+address in the last :data:`KNOWN_FOR_S`, right or wrong, until its bucket refills: a guess answers
+nothing while it is limited. A key already at work from that address (a colleague behind the same NAT
+as the guesser) is served as always (issue 34, item 5): guessing the keys already at work from an
+address is the one answer a limited address still gets, and a key's length answers that (make keys
+random, 32 bytes: ``openssl rand -hex 32``).
+Behind a reverse proxy the address is the proxy's
 unless uvicorn runs with ``--proxy-headers`` and the proxy is trusted (``--forwarded-allow-ips``).
 An unknown job id and another key's answer the same 404 after the same lookups (:func:`job_of`).
 """
@@ -88,6 +93,33 @@ class RateLimiter:
 
 #: Client addresses whose failure buckets are kept; beyond, the full (refilled) ones are dropped.
 MAX_TRACKED_ADDRESSES = 10_000
+#: Seconds a key used successfully from an address stays exempt from that address's failure limit.
+KNOWN_FOR_S = 3600.0
+#: (address, owner) pairs remembered as known; beyond, the oldest are forgotten.
+MAX_KNOWN_PAIRS = 10_000
+
+
+@dataclass
+class KnownKeys:
+    """The owners whose key was used successfully from each address, and when last (per API process)."""
+
+    _seen: dict[tuple[str, str], float] = field(default_factory=dict)
+    _lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def saw(self, address: str, owner: str) -> None:
+        now = time.monotonic()
+        with self._lock:
+            self._seen.pop((address, owner), None)  # re-inserted last: the dict is ordered by last use
+            self._seen[(address, owner)] = now
+            while len(self._seen) > MAX_KNOWN_PAIRS:
+                del self._seen[next(iter(self._seen))]
+
+    def known(self, address: str, owner: str | None) -> bool:
+        if owner is None:
+            return False
+        with self._lock:
+            when = self._seen.get((address, owner))
+        return when is not None and time.monotonic() - when < KNOWN_FOR_S
 
 
 @dataclass
@@ -132,6 +164,7 @@ class Access:
         self.keys = load_keys(settings)
         self.limiter = RateLimiter(settings.rate_limit_per_minute) if settings.rate_limit_per_minute else None
         self.failures = FailureLimiter(settings.auth_failures_per_minute) if settings.auth_failures_per_minute else None
+        self.known = KnownKeys()
 
     def owner(self, request: Request) -> str | None:
         """The caller's owner id (None when keys are off); 401 without a valid key, 429 past its rate."""
@@ -145,20 +178,22 @@ class Access:
             raise ProblemError(401, "API key required", "send your API key as 'Authorization: Bearer <key>' or "
                                "'X-API-Key: <key>'", UNAUTHORIZED, headers={"WWW-Authenticate": "Bearer"})
         address = request.client.host if request.client is not None else "-"
-        if self.failures is not None:
-            wait = self.failures.wait_s(address)
-            if wait > 0:  # checked before the key: while limited, a guess tells nothing
-                retry = max(1, math.ceil(wait))
-                raise ProblemError(429, "Too many unknown keys", f"this address sent more than "
-                                   f"{self.failures.per_minute} unknown API keys in a minute; retry after {retry} s",
-                                   RATE_LIMITED, headers={"Retry-After": str(retry)})
         digest = hashlib.sha256(key.encode()).hexdigest()
         owner = next((o for d, o in self.keys.items() if hmac.compare_digest(d, digest)), None)
+        if self.failures is not None and not self.known.known(address, owner):
+            wait = self.failures.wait_s(address)
+            if wait > 0:  # a key new to this address, right or wrong, answers alike: a guess tells nothing
+                retry = max(1, math.ceil(wait))
+                raise ProblemError(429, "Too many unknown keys", f"this address sent more than "
+                                   f"{self.failures.per_minute} unknown API keys in a minute; retry after {retry} s "
+                                   "(keys already used from this address are served meanwhile)",
+                                   RATE_LIMITED, headers={"Retry-After": str(retry)})
         if owner is None:
             if self.failures is not None:
                 self.failures.failed(address)
             raise ProblemError(401, "Unknown API key", "the API key sent is not one of this service's",
                                UNAUTHORIZED, headers={"WWW-Authenticate": 'Bearer error="invalid_token"'})
+        self.known.saw(address, owner)
         if self.limiter is not None:
             wait = self.limiter.wait_s(owner)
             if wait > 0:

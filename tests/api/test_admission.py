@@ -112,14 +112,17 @@ def test_an_ensemble_has_at_most_max_ensemble_chunks_chunks(app_with):
 
 
 def test_failed_authentication_is_rate_limited_per_address(app_with):
-    client = app_with(API_KEYS="alice:alpha-secret", AUTH_FAILURES_PER_MINUTE="3")
+    client = app_with(API_KEYS="alice:alpha-secret,bob:beta-secret", AUTH_FAILURES_PER_MINUTE="3")
     wrong = {"X-API-Key": "guess"}
+    assert client.get("/v1/systems", headers=A).status_code == 200  # alice works from this address
     assert [client.get("/v1/systems", headers=wrong).status_code for _ in range(3)] == [401] * 3
     limited = client.get("/v1/systems", headers=wrong)
     assert limited.status_code == 429 and limited.json()["type"] == "/problems/rate-limited"
     assert 1 <= int(limited.headers["retry-after"]) <= 20  # one failure's token comes back in 20 s
-    # while limited, the right key answers the same: a guess tells nothing
-    assert client.get("/v1/systems", headers=A).status_code == 429
+    # a key already at work from this address is not locked out by a guesser beside it (issue 34, item 5)
+    assert [client.get("/v1/systems", headers=A).status_code for _ in range(5)] == [200] * 5
+    # a key new to this address answers as a wrong one while limited: a guess tells nothing
+    assert client.get("/v1/systems", headers=B).status_code == 429
     assert client.get("/v1/systems").status_code == 401  # no key: nothing guessed, nothing counted
     other = TestClient(client.app, client=("192.0.2.7", 40000))  # another address has its own bucket
     assert other.get("/v1/systems", headers=A).status_code == 200
