@@ -45,6 +45,14 @@ class Settings(BaseSettings):
     visibility_timeout_s: float = Field(3600.0, gt=0, description="broker redelivery timeout (> time limits)")
     job_ttl_s: int = Field(7 * 24 * 3600, gt=0, description="how long job records and results are kept")
     embedded_workers: int = Field(1, ge=1, description="threads running jobs in embedded mode")
+    embedded_long_lane: int = Field(2, ge=0, description="embedded mode: jobs past embedded_long_after_s of work "
+                                    "that run beside the embedded_workers threads, which take the next jobs "
+                                    "(0: a long job keeps its thread)")
+    embedded_long_after_s: float = Field(5.0, gt=0, description="embedded mode: seconds of work after which a job "
+                                         "moves to the long lane (a scheduling choice: no result depends on it)")
+    max_job_attempts: int = Field(2, ge=1, description="starts of one job: a job whose runner stopped this many times "
+                                  "while running it (a crash, a restart, a lost worker) is not started again but "
+                                  "failed as quarantined, with the reason")
     symbolic_workers: int = Field(2, ge=1, description="symbolic requests running at once (child processes)")
     symbolic_queue: int = Field(8, ge=0,
                                 description="symbolic requests waiting for a slot; beyond: 503 with Retry-After")

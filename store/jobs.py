@@ -68,6 +68,14 @@ class ActiveBoundReached(Exception):
         self.active = active
 
 
+def quarantined_error(attempts: int) -> dict[str, str]:
+    """The error of a job not started again after ``attempts`` starts (:meth:`JobStore.quarantine`)."""
+    return {"type": "Quarantined", "message": (
+        f"the job was started {attempts} times and each run ended without a result (the service or its worker "
+        "stopped, or its runner died, while it ran); it is not started again. If it is a long job, it may "
+        "need more than the service's time limits; send it again to run it once more")}
+
+
 def owner_lock_key(owner: str) -> tuple[int, int]:
     """The two int4 keys of ``owner``'s advisory lock (``pg_advisory_xact_lock(k1, k2)``)."""
     return OWNER_LOCK_CLASS, zlib.crc32(owner.encode()) - (1 << 31)
@@ -250,15 +258,32 @@ class JobStore:
         self._changed(update(_JOBS).where(_JOBS.c.id == job_id, _JOBS.c.broker_epoch.is_(None))
                       .values(broker_epoch=broker_epoch))
 
-    def start(self, job_id: str, worker: str) -> bool:
+    def start(self, job_id: str, worker: str, max_attempts: int | None = None) -> bool:
         """Mark the job running on ``worker`` if it is queued, or was running on that same worker (its
         pool process died and the worker took it again); False otherwise: it ended, was cancelled, or
-        runs elsewhere (do not run it)."""
-        return self._changed(
-            update(_JOBS).where(_JOBS.c.id == job_id,
-                                or_(_JOBS.c.status == "queued",
-                                    and_(_JOBS.c.status == "running", _JOBS.c.worker == worker)))
-            .values(status="running", worker=worker, attempts=_JOBS.c.attempts + 1))
+        runs elsewhere (do not run it). With ``max_attempts``, a job started that many times already
+        (its runner stopped each time before it ended) is not started but quarantined (:meth:`quarantine`)."""
+        condition = [_JOBS.c.id == job_id,
+                     or_(_JOBS.c.status == "queued", and_(_JOBS.c.status == "running", _JOBS.c.worker == worker))]
+        if max_attempts is not None:
+            condition.append(_JOBS.c.attempts < max_attempts)
+        if self._changed(update(_JOBS).where(*condition)
+                         .values(status="running", worker=worker, attempts=_JOBS.c.attempts + 1)):
+            return True
+        if max_attempts is not None:
+            self.quarantine(job_id, worker, max_attempts)
+        return False
+
+    def quarantine(self, job_id: str, worker: str, max_attempts: int) -> bool:
+        """Fail a job ``worker`` could start (queued, or running on ``worker`` itself) that was started
+        ``max_attempts`` times already, saying so (a poison job: each run stopped its runner, or the service
+        stopped under it); True if this call did. A job running on another worker is left alone (a message
+        delivered twice). Issue 34, item 4: such a job is not run again blindly."""
+        return self._changed(update(_JOBS).where(_JOBS.c.id == job_id, _JOBS.c.attempts >= max_attempts,
+                                                 or_(_JOBS.c.status == "queued",
+                                                     and_(_JOBS.c.status == "running", _JOBS.c.worker == worker)))
+                             .values(status="failed", worker=None, finished=_now().timestamp(),
+                                     error=quarantined_error(max_attempts)))
 
     def finish(self, job_id: str, status: str, result: dict[str, Any] | None = None,
                error: dict[str, Any] | None = None) -> bool:

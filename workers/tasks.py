@@ -97,17 +97,19 @@ def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
     a string holding that JSON. A job sent straight to the queue by a job-queue client
     (``send_task("nonholonomic.simulate", args=[request], queue=...)``) is recorded here when it
     starts, unless the API recorded it already. A job that ended, was cancelled or runs on another
-    worker is not run (a message delivered twice). Anything invalid fails with the reason
+    worker is not run (a message delivered twice); one started ``max_job_attempts`` times already is
+    failed as quarantined (a poison message), not run again. Anything invalid fails with the reason
     (:class:`workers.jobs.InvalidJob`).
     """
     job_id = self.request.id
     request, refused = request_from_args(args, kwargs)
     try:
         store = job_store()
-        started = store.start(job_id, _worker_key())
+        attempts = get_settings().max_job_attempts  # a poison message: quarantined after that many starts
+        started = store.start(job_id, _worker_key(), attempts)
         if not started:  # sent straight to the broker: record it (unless the API just did), then start it
             store.ensure(job_id, request, (self.request.delivery_info or {}).get("routing_key"))
-            started = store.start(job_id, _worker_key())
+            started = store.start(job_id, _worker_key(), attempts)
     except OperationalError as exc:  # the database is away: try again in a few seconds, the job unchanged
         raise self.retry(exc=exc, countdown=START_RETRY_S, max_retries=None) from None
     if not started:

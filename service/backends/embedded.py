@@ -7,6 +7,13 @@ inside heyoka's integrations), and Python code that reports none gets :class:`Jo
 its thread, as Celery's signal does in a worker; the job fails naming the limit. A job still running
 at the hard limit (stuck in code that never comes back to Python) is recorded failed and its thread
 abandoned: a new thread takes its place (:class:`service.backends.job_threads.JobThreads`).
+
+No job holds the others (issue 34, item 4). A job past ``embedded_long_after_s`` of work moves to the
+long lane (up to ``embedded_long_lane`` such jobs): a new thread takes the next jobs, so a short job
+does not wait behind a long one. A cancelled job whose thread has not come back to Python within
+:data:`CANCEL_GRACE_S` (inside an LLVM compile) is let go the same way: its thread ends when the compile
+returns, and its place is taken at once. A job started ``max_job_attempts`` times (the service stopped
+under it each time) is quarantined as failed at the next start, not run again.
 """
 
 from __future__ import annotations
@@ -37,6 +44,8 @@ log = logging.getLogger(__name__)
 WATCHDOG_INTERVAL_S = 0.25
 #: Seconds :meth:`EmbeddedBackend.close` waits for the running jobs to stop.
 CLOSE_WAIT_S = 5.0
+#: Seconds a cancelled job's thread has to come back to Python before its place is given to a new thread.
+CANCEL_GRACE_S = 2.0
 
 
 def abandoned_message(limit_s: float) -> str:
@@ -54,6 +63,10 @@ class _Running:
     inside: bool = True
     interrupted: bool = False
     abandoned: bool = False
+    #: Moved to the long lane (:meth:`JobThreads.promote`).
+    promoted: bool = False
+    #: When it was cancelled (monotonic seconds), if it was while running.
+    cancelled_at: float | None = None
 
 
 def _raise_in(thread: threading.Thread, exc: type[BaseException] | None) -> None:
@@ -85,7 +98,8 @@ class EmbeddedBackend:
         self._threads = settings.embedded_workers
         self._soft_limit_s, self._hard_limit_s = settings.job_soft_time_limit_s, settings.job_time_limit_s
         self._running: dict[str, _Running] = {}
-        self._pool = JobThreads(self._threads, "nonholonomic-job")
+        self._long_after_s, self._max_attempts = settings.embedded_long_after_s, settings.max_job_attempts
+        self._pool = JobThreads(self._threads, "nonholonomic-job", settings.embedded_long_lane)
         self.ensembles = EnsembleStore(self.store.engine, settings.job_ttl_s)
         self.keys = IdempotencyKeys(self.store.engine)
         self._closing = threading.Event()
@@ -142,7 +156,7 @@ class EmbeddedBackend:
     def _run(self, job_id: str) -> None:
         cancelled = self._cancel[job_id]
         stored = self.store.get(job_id)
-        if stored is None or cancelled.is_set() or not self.store.start(job_id, "embedded"):
+        if stored is None or cancelled.is_set() or not self.store.start(job_id, "embedded", self._max_attempts):
             self._forget(job_id)
             return
         deadline = Deadline(self._soft_limit_s)
@@ -184,19 +198,36 @@ class EmbeddedBackend:
             self._running.pop(running.job_id, None)
 
     def _watch(self) -> None:
-        """The watchdog: raises :class:`JobTimeout` in a job's thread at its soft limit (for Python code
-        that reports no progress), and at its hard limit records the job failed and replaces its thread."""
+        """The watchdog: moves a job past ``embedded_long_after_s`` to the long lane, lets go of a cancelled
+        job's thread after :data:`CANCEL_GRACE_S`, raises :class:`JobTimeout` in a job's thread at its soft
+        limit (for Python code that reports no progress), and at its hard limit records the job failed and
+        replaces its thread."""
         while not self._closing.wait(WATCHDOG_INTERVAL_S):
             now = time.monotonic()
             with self._lock:
-                late = [r for r in self._running.values() if r.inside and now - r.started >= self._soft_limit_s]
+                running_now = [r for r in self._running.values() if r.inside]
+                late = [r for r in running_now if now - r.started >= self._soft_limit_s]
                 for running in late:
                     if not running.interrupted:
                         running.interrupted = True
                         _raise_in(running.thread, JobTimeout)
+            for running in running_now:
+                if not running.promoted and now - running.started >= self._long_after_s:
+                    running.promoted = self._pool.promote(running.thread)
+                if running.cancelled_at is not None and now - running.cancelled_at >= CANCEL_GRACE_S:
+                    self._let_go(running)
             for running in late:
                 if now - running.started >= self._hard_limit_s and not running.abandoned:
                     self._abandon(running)
+
+    def _let_go(self, running: _Running) -> None:
+        """A cancelled job still inside code that does not come back to Python (a compile): its thread
+        ends when that returns (its job stops at its first progress report), and its place is taken now."""
+        running.abandoned = True  # cancelled in the store already: nothing more to record
+        self._pool.replace(running.thread, f"its job was cancelled and had not stopped {CANCEL_GRACE_S:g} s later")
+        with self._lock:
+            self._running.pop(running.job_id, None)
+            self._progress.pop(running.job_id, None)
 
     def _abandon(self, running: _Running) -> None:
         running.abandoned = True
@@ -254,6 +285,10 @@ class EmbeddedBackend:
             event = self._cancel.get(job_id)
             if event is not None:
                 event.set()  # a running job stops at its next progress report
+            with self._lock:
+                running = self._running.get(job_id)
+                if running is not None:  # or its thread is let go after CANCEL_GRACE_S
+                    running.cancelled_at = time.monotonic()
         return self.get(job_id)
 
     def list_jobs(self, status: str | None, limit: int, cursor: str | None,
@@ -278,7 +313,7 @@ class EmbeddedBackend:
             ": jobs would wait for it")
         store = "ok" if self.store.ping() else "unreachable"
         return {"ok": warm and store == "ok", "mode": self.mode, "broker": "none (embedded)", "store": store,
-                "workers": {"threads": self._threads, "warm": warm, "warm_up": w.as_json()},
+                "workers": {"threads": self._threads, "warm": warm, "warm_up": w.as_json(), **self._pool.status()},
                 **({"detail": detail} if detail else {})}
 
     def close(self) -> None:

@@ -1,5 +1,7 @@
 """Embedded mode's job threads: a fixed number of threads taking work from one queue, first in first
-out, where a thread stuck past a job's hard time limit is replaced.
+out, where a thread stuck past a job's hard time limit is replaced, and a thread on a long job moves to
+the long lane (:meth:`JobThreads.promote`): a new thread takes its place in the queue, so short jobs do
+not wait behind a long one (issue 34, item 4).
 
 A Python thread cannot be killed. A job that ignores its soft limit (code that never comes back to
 Python, such as a compile in LLVM) is abandoned at its hard limit: :meth:`JobThreads.replace` starts
@@ -25,14 +27,20 @@ class JobThreads:
 
     Parameters
     ----------
-    count : how many calls run at once.
+    count : how many threads take calls from the queue.
     name : the threads' name prefix.
+    long_lane : how many threads on long calls may be promoted out of the queue's ``count`` at once.
     """
 
-    def __init__(self, count: int, name: str) -> None:
+    def __init__(self, count: int, name: str, long_lane: int = 0) -> None:
         self._work: queue.SimpleQueue[tuple[Callable[..., Any], tuple[Any, ...]] | None] = queue.SimpleQueue()
         self._name, self._lock, self._serial = name, threading.Lock(), 0
         self._threads: set[threading.Thread] = set()
+        self.long_lane = long_lane
+        #: Threads finishing a long call in the long lane (they end with it).
+        self.promoted: set[threading.Thread] = set()
+        #: Threads given up (stuck, or a cancelled job's) and replaced.
+        self.let_go = 0
         self._closed = False
         with self._lock:
             for _ in range(count):
@@ -53,15 +61,41 @@ class JobThreads:
         """Calls not started yet."""
         return self._work.qsize()
 
-    def replace(self, thread: threading.Thread) -> bool:
-        """Give ``thread``'s place to a new thread (``thread`` is stuck); True if it was one of ours."""
+    def status(self) -> dict[str, Any]:
+        """For ``/health``: the long lane's size and occupancy, and how many threads were let go."""
         with self._lock:
-            if thread not in self._threads or self._closed:
+            return {"long_lane": {"size": self.long_lane, "running": len(self.promoted)}, "let_go": self.let_go}
+
+    def replace(self, thread: threading.Thread, why: str = "stuck past a job's hard time limit") -> bool:
+        """Give ``thread``'s place to a new thread (``thread`` is stuck, or runs a cancelled job that has not
+        come back to Python yet); True if it was one of ours."""
+        with self._lock:
+            if self._closed:
+                return False
+            if thread in self.promoted:  # its place in the long lane is free again
+                self.promoted.discard(thread)
+                self.let_go += 1
+                return True
+            if thread not in self._threads:
                 return False
             self._threads.discard(thread)
             self._start()
-        log.error("job thread %s abandoned (stuck past a job's hard time limit); %s started in its place",
-                  thread.name, f"{self._name}-{self._serial}")
+            self.let_go += 1
+        log.error("job thread %s abandoned (%s); %s started in its place", thread.name, why,
+                  f"{self._name}-{self._serial}")
+        return True
+
+    def promote(self, thread: threading.Thread) -> bool:
+        """Move ``thread`` (on a long call) to the long lane if it has room: a new thread takes its place in
+        the queue and ``thread`` ends with its call. True if moved."""
+        with self._lock:
+            if self._closed or thread not in self._threads or len(self.promoted) >= self.long_lane:
+                return False
+            self._threads.discard(thread)
+            self.promoted.add(thread)
+            self._start()
+        log.info("job thread %s moved to the long lane; %s takes the next jobs", thread.name,
+                 f"{self._name}-{self._serial}")
         return True
 
     def _loop(self) -> None:
@@ -76,7 +110,8 @@ class JobThreads:
             except Exception:  # logged; the thread takes the next call
                 log.exception("job thread %s: uncaught error", me.name)
             with self._lock:
-                if me not in self._threads:  # replaced while stuck: the new thread has its place
+                if me not in self._threads:  # promoted, or replaced while stuck: the new thread has its place
+                    self.promoted.discard(me)
                     return
 
     def close(self, timeout: float) -> None:
@@ -85,6 +120,7 @@ class JobThreads:
         with self._lock:
             self._closed = True
             threads = list(self._threads)
+            promoted = list(self.promoted)
         while True:
             try:
                 self._work.get_nowait()
@@ -93,5 +129,5 @@ class JobThreads:
         for _ in threads:
             self._work.put(None)
         end = time.monotonic() + timeout
-        for thread in threads:
+        for thread in threads + promoted:
             thread.join(max(0.0, end - time.monotonic()))

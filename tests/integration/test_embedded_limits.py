@@ -5,12 +5,17 @@
 * a Poincaré surface that is not smooth where the orbit meets it (``sqrt(gamma1)`` crossed at
   γ1 = 0, the audit's body) ends with a clear error instead of running forever;
 * a job cancelled inside a long heyoka call (a Lyapunov spectrum whose one QR interval is the whole
-  run) stops at once and frees the thread.
+  run) stops at once and frees the thread;
+* no job holds the others (issue 34, item 4): an admissible but pathological job (M ~ 1e12, minutes of
+  tiny steps) moves to the long lane and small jobs sent after it succeed while it runs; SIGKILLed twice
+  under it, the service does not run it a third time but fails it as quarantined; a job cancelled while
+  its integrator compiles gives its thread's place up within seconds.
 """
 
 from __future__ import annotations
 
 import signal
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -25,6 +30,9 @@ BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.
         "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 11}
 #: Thousands of seconds of integration: it ends only by its time limit or a cancellation.
 ENDLESS = {**BODY, "t_final": 1e9}
+#: The audit's pathological job: admissible, and its integration crawls (progress ~2e-8 a second) until its
+#: time limit (600 s by default).
+PATHOLOGICAL = {**BODY, "initial_state": {"M": [1e12, -1e12, 1e12], "gamma": [0.0, 0.6, 0.8]}, "t_final": 10.0}
 #: Soft and hard limits of these tests (the soft one well above a first job's compile on a busy machine).
 SOFT_S, HARD_S = 8, 16
 #: Hang guard (seconds) of each wait (an API's start, a small job, a job's first compile): far above the
@@ -80,10 +88,10 @@ def test_a_job_past_its_time_limit_frees_the_thread_also_after_a_restart(api):
     api.process.send_signal(signal.SIGKILL)  # the audit: the poison job is resumed by the next start
     api.process.wait(10)
     api.start()
-    small = api.post(BODY)  # behind the resumed job, on the one thread
+    small = api.post(BODY)  # beside the resumed job once it moved to the long lane
     view = poll_job(api.client, small, timeout=GUARD_S + SOFT_S)
     assert view["status"] == "succeeded", view["error"]
-    poisoned = api.client.get(endless).json()
+    poisoned = poll_job(api.client, endless, timeout=GUARD_S + HARD_S)
     assert poisoned["status"] == "failed"
     assert poisoned["error"] == {"type": "JobTimeout", "message": f"the job exceeded its time limit of {SOFT_S} s"}
 
@@ -128,3 +136,54 @@ def test_cancelling_a_job_inside_a_long_heyoka_call_stops_it_and_frees_the_threa
     view = api.client.get(small).json()
     assert view["status"] == "succeeded", view["error"]
     assert api.client.get(location).json()["status"] == "cancelled"
+
+
+def _small_job_beside(api: EmbeddedAPI, long_job: str) -> float:
+    """Seconds a small job sent now took to succeed, while ``long_job`` ran all along."""
+    sent = time.monotonic()
+    view = poll_job(api.client, api.post(BODY), timeout=GUARD_S)
+    waited = time.monotonic() - sent
+    assert view["status"] == "succeeded", view["error"]
+    assert api.client.get(long_job).json()["status"] == "running"  # it did not wait for the long job's end
+    return waited
+
+
+def test_a_pathological_job_holds_no_other_and_is_quarantined_after_two_interrupted_runs(api):
+    long_job = api.post(PATHOLOGICAL)
+    wait_until(lambda: api.client.get(long_job).json()["progress"] > 0, GUARD_S,
+               "the pathological job to run (a hang guard)")
+    waits = [_small_job_beside(api, long_job)]
+    health = api.client.get("/health").json()["workers"]
+    assert health["long_lane"]["running"] == 1 and health["long_lane"]["size"] == 2, health
+    api.process.send_signal(signal.SIGKILL)
+    api.process.wait(10)
+    api.start()  # the pathological job is resumed once (its second start) ...
+    wait_until(lambda: api.client.get(long_job).json()["progress"] > 0, GUARD_S, "its second run (a hang guard)")
+    waits.append(_small_job_beside(api, long_job))
+    api.process.send_signal(signal.SIGKILL)
+    api.process.wait(10)
+    api.start()  # ... and not a third time
+    view = poll_job(api.client, long_job, timeout=GUARD_S)
+    assert view["status"] == "failed" and view["error"]["type"] == "Quarantined", view
+    assert "started 2 times" in view["error"]["message"]
+    waits.append(time.monotonic())
+    small = poll_job(api.client, api.post(BODY), timeout=GUARD_S)
+    assert small["status"] == "succeeded", small["error"]
+    print(f"small jobs beside the pathological one succeeded after {waits[0]:.1f} s and {waits[1]:.1f} s "
+          f"(embedded_long_after_s 5 s); quarantined at the second restart")
+
+
+def test_a_job_cancelled_while_its_integrator_compiles_gives_its_place_up(api):
+    # a Lyapunov spectrum: its variational equations compile first (seconds of LLVM, no progress reports)
+    compiling = api.post({**BODY, "t_final": 2e6, "lyapunov": {"interval": 2e6}})
+    wait_until(lambda: api.client.get(compiling).json()["status"] == "running", GUARD_S,
+               "the job to start (a hang guard)", interval=0.01)
+    cancelled_at = time.monotonic()
+    r = api.client.delete(compiling)
+    assert r.status_code == 202 and r.json()["status"] == "cancelled"
+    small = poll_job(api.client, api.post({**BODY, "t_final": 5.0}), timeout=GUARD_S)
+    assert small["status"] == "succeeded", small["error"]
+    assert api.client.get(compiling).json()["status"] == "cancelled"
+    let_go = api.client.get("/health").json()["workers"]["let_go"]
+    print(f"small job succeeded {time.monotonic() - cancelled_at:.1f} s after the cancel; threads let go "
+          f"inside a compile: {let_go}")

@@ -21,6 +21,7 @@ import pytest
 import redis
 from celery import Celery
 
+from store.jobs import JobStore
 from tests.support import (
     TEST_REDIS_URL,
     free_port,
@@ -210,3 +211,31 @@ def test_cancelling_a_running_job_stops_it_and_frees_the_worker(stack):
     assert log.index(f"simulate[{job_id}] ignored") < log.index(f"simulate[{short['id']}] received")
     final = np.array(short["result"]["final_state"]["M"])
     assert np.all(np.isfinite(final))
+
+
+def test_a_job_whose_pool_process_dies_twice_is_quarantined_not_run_a_third_time(stack):
+    """A poison message (issue 34, item 4): its runner died under it twice, so the third delivery fails it as
+    quarantined (max_job_attempts, 2) instead of running it again; the worker goes on with other jobs."""
+    from tests.support import queue_database_url
+
+    worker = stack.start_worker()
+    wait_healthy(stack.base, timeout=WARM_GUARD_S)
+    location = stack.client.post("/v1/jobs", json={**LONG, "t_final": 1e8}).headers["location"]
+    job_id = location.rsplit("/", 1)[1]
+    jobs = JobStore(queue_database_url(stack.queue), 600)
+    try:
+        for attempt in (1, 2):
+            wait_until(lambda a=attempt: (j := jobs.get(job_id)) is not None and j.attempts == a
+                       and j.status == "running", REDELIVERY_GUARD_S, f"start {attempt} of the job (a hang guard)")
+            (child,) = _children(worker.pid)
+            os.kill(child, signal.SIGKILL)  # its runner dies under it
+            wait_until(lambda c=child: _children(worker.pid) not in ([], [c]), GUARD_S,
+                       "a new pool process (a hang guard)")
+        view = poll_job(stack.client, location, timeout=REDELIVERY_GUARD_S)
+        assert view["status"] == "failed" and view["error"]["type"] == "Quarantined", view
+        assert "started 2 times" in view["error"]["message"]
+        assert jobs.get(job_id).attempts == 2  # not started a third time
+    finally:
+        jobs.close()
+    short = poll_job(stack.client, stack.client.post("/v1/jobs", json=BODY).headers["location"], timeout=GUARD_S)
+    assert short["status"] == "succeeded"

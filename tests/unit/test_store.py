@@ -101,3 +101,21 @@ def test_migrating_logs_one_line_when_the_schema_changes_and_nothing_from_alembi
     caplog.clear()
     fresh.migrate()  # up to date: silent
     assert not [r for r in caplog.records if r.name.startswith("alembic") or r.name == "store.jobs"]
+
+
+def test_a_job_started_max_attempts_times_is_quarantined_not_started_again(store):
+    """Issue 34, item 4: each start counts; a job whose runner stopped under it ``max_attempts`` times (here
+    2) is failed as quarantined at its next start, and one that ended or is running elsewhere is untouched."""
+    store.create("poison", REQUEST)
+    assert store.start("poison", "w1", max_attempts=2)  # its runner dies ...
+    store.requeue("poison")
+    assert store.start("poison", "w2", max_attempts=2)  # ... and again
+    store.requeue("poison")
+    assert not store.start("poison", "w3", max_attempts=2)
+    job = store.get("poison")
+    assert job.status == "failed" and job.attempts == 2 and job.error["type"] == "Quarantined"
+    assert "started 2 times" in job.error["message"]
+    store.create("busy", REQUEST)
+    assert store.start("busy", "w1", max_attempts=1)
+    assert not store.start("busy", "w2", max_attempts=1)  # running on w1: neither started nor quarantined
+    assert store.status("busy") == "running" and not store.quarantine("busy", "w2", 1)
