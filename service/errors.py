@@ -180,6 +180,18 @@ def install_error_handlers(app: FastAPI) -> None:
                                        "retry later"),
                         request)
 
+    @app.exception_handler(OverflowError)
+    @app.exception_handler(MemoryError)
+    @app.exception_handler(FloatingPointError)
+    async def _numeric(request: Request, exc: Exception) -> JSONResponse:
+        """The safety net of issue 34, item 2: the numbers of a request (its expressions' values) that leave
+        the floating-point range or the memory where no route named the field more precisely."""
+        log.warning("numeric failure on %s: %s: %s", request.url.path, type(exc).__name__, exc)
+        return _respond(invalid_request([FieldError(field="body", reason=(
+            f"evaluating the request's expressions or numbers left the floating-point range or the memory "
+            f"({type(exc).__name__}): values that grow too fast (a tower of exponentials, say) or constants too "
+            "large or too small"))]).problem, request)
+
     @app.exception_handler(Exception)
     async def _internal(request: Request, exc: Exception) -> JSONResponse:
         log.exception("unhandled error on %s", request.url.path)

@@ -29,6 +29,7 @@ from pydantic import ValidationError
 from starlette.concurrency import run_in_threadpool
 
 from nonholonomic.expressions.size import size_problem
+from nonholonomic.numerics.overflow import NUMERIC_ERRORS, numeric_problems
 from schemas.ensembles import EnsembleRequest
 from schemas.jobs import JobRequest
 from schemas.problems import OVERLOADED, FieldError
@@ -76,7 +77,10 @@ def past_safety_cap(cap_s: float, fields: Sequence[str]) -> ProblemError:
 
 def _check(kind: str, body: JobRequest | EnsembleRequest, step: Step = no_step) -> tuple[Problems, Chunks]:
     """The request's problems (``(field, reason)``) and, for a valid ensemble, its chunks."""
-    found = [(p.field, p.reason) for p in body.problems(step)]
+    try:
+        found = [(p.field, p.reason) for p in body.problems(step)]
+    except NUMERIC_ERRORS as exc:  # a number past the float range or the memory: name the expressions
+        return numeric_problems(body.expressions(), exc), None
     chunks = None
     if kind == "ensemble" and not found:
         assert isinstance(body, EnsembleRequest)  # the model of kind "ensemble"

@@ -8,12 +8,15 @@ When that happens the request is refused naming the field(s) whose value overflo
 
 from __future__ import annotations
 
+import ast
 import math
 from collections.abc import Mapping, Sequence
 
 import sympy as sp
 
-__all__ = ["NUMERIC_ERRORS", "overflowing_fields"]
+from nonholonomic.expressions import parse_expression
+
+__all__ = ["NUMERIC_ERRORS", "numeric_problems", "overflowing_fields"]
 
 #: What a numeric evaluation of a user's expression may raise past the float range or the memory.
 NUMERIC_ERRORS = (OverflowError, MemoryError, RecursionError, FloatingPointError)
@@ -57,3 +60,29 @@ def overflowing_fields(fields: Mapping[str, sp.Expr | None], variables: Sequence
                                   "grows this fast cannot be evaluated or checked"))
                 break
     return out
+
+
+def _variable_names(text: str) -> set[str]:
+    """The names an expression uses as variables (not called, not a constant), read from its syntax tree."""
+    tree = ast.parse(text.replace("^", "**"), mode="eval")
+    called = {id(n.func) for n in ast.walk(tree) if isinstance(n, ast.Call)}
+    return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and id(n) not in called} - {"pi", "E"}
+
+
+def numeric_problems(expressions: Sequence[tuple[str, str]], exc: BaseException) -> list[tuple[str, str]]:
+    """The fields of a request whose check raised ``exc`` (one of :data:`NUMERIC_ERRORS`): those of
+    ``expressions`` (``(field, text)``) whose float value overflows at sample points, else every one of them
+    (issue 34, item 2: a numeric failure is a 422 naming the field, never a 500)."""
+    parsed: dict[str, sp.Expr | None] = {}
+    for field, text in expressions:
+        try:
+            parsed[field] = parse_expression(text, {n: sp.Symbol(n) for n in _variable_names(text)})
+        except Exception:  # noqa: BLE001 - an expression the parser refuses was reported already
+            continue
+    symbols = sorted({s for e in parsed.values() if e is not None for s in e.free_symbols}, key=str)
+    culprits = overflowing_fields(parsed, symbols, {})
+    if culprits:
+        return culprits
+    why = (f"evaluating it left the floating-point range or the memory ({type(exc).__name__}): its values grow "
+           "too fast (a tower of exponentials, say) or its constants are too large or too small")
+    return [(field, why) for field, _ in expressions] or [("body", why)]
