@@ -236,13 +236,18 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
             tuple(symbols[v] for v in request.velocities), parsed["a1"], parsed["a2"], parsed["b"], potential,
             {symbols[k]: v for k, v in request.parameters.items()})
     kwargs = {"domain": domain, "shift": shift, "multiplier_symbol": multiplier, "limits": _limits(request)}
+    variables = [symbols[n] for n in (*request.coordinates, *request.velocities)]
+    values = {symbols[k]: float(v) for k, v in request.parameters.items()}
+    # First, in floats at the sample points (milliseconds): an expression whose value overflows there cannot
+    # be checked numerically, and sympy would spend minutes on it before saying so (a tower of exp in b).
+    overflowing = overflowing_fields({**parsed, "potential": potential}, variables, values)
+    if overflowing:
+        raise RefusedFields(overflowing)
     try:
         return reduce(*args, **kwargs).to_json()
     except RefusedField:
         raise
     except NUMERIC_ERRORS as exc:  # a numeric check past the float range or the memory: name the field
-        variables = [symbols[n] for n in (*request.coordinates, *request.velocities)]
-        values = {symbols[k]: float(v) for k, v in request.parameters.items()}
         culprits = overflowing_fields({**parsed, "potential": potential}, variables, values) or [
             (field, f"evaluating the expressions failed ({type(exc).__name__}): one of them grows too fast to be "
                     "evaluated or checked") for field in ("L", "a1", "a2", "b")]
