@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Literal, cast
 
+import numpy as np
 from pydantic import (
     BaseModel,
     ConfigDict,
@@ -15,10 +16,11 @@ from pydantic import (
 )
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.evidence.claims import MAX_CLAIMS, parse_claim
+from nonholonomic.evidence.claims import MAX_CLAIMS, claim_initial_problem, parse_claim
 from nonholonomic.expressions import ExpressionError
 from nonholonomic.initial_state import FieldProblem
 from nonholonomic.numerics.integration import MACHINE_EPSILON, SCIPY_MIN_TOLERANCE
+from nonholonomic.numerics.kernels import parameter_vector, state_vector
 from nonholonomic.potentials import MAX_EXPRESSION_LENGTH
 from nonholonomic.simulation import DEFAULT_CHECKS, available_checks
 from schemas.analysis import LyapunovRequest, PoincareRequest
@@ -163,13 +165,23 @@ class JobRequest(BaseModel):
                                                                "variational equations)"))
             found += self.periodic_orbit.problems(system, self.system.parameter_values(),
                                                   self.t_final, self.integrator.tolerance)
+        start = None if found or not self.claims else self._start(system)
         for i, claim in enumerate(self.claims):
             step([f"claims[{i}].expression"])
             try:
                 parse_claim(system, claim.expression)
             except ExpressionError as exc:
                 found.append(FieldProblem(f"claims[{i}].expression", str(exc)))
+                continue
+            why = None if start is None else claim_initial_problem(system, *start, claim.expression)
+            if why is not None:
+                found.append(FieldProblem(f"claims[{i}].expression", why))
         return found
+
+    def _start(self, system: MechanicalSystem) -> tuple[np.ndarray, np.ndarray]:
+        """The parameter vector and the initial state vector (a valid request's)."""
+        p = parameter_vector(system, dict(self.system.parameter_values()))
+        return p, state_vector(system, dict(self.initial_state), p)
 
 
 def analysis_problems(system: MechanicalSystem, integrator: IntegratorOptions, t_final: float,

@@ -127,12 +127,14 @@ class ClaimItem(BaseModel):
 
     name: str
     expression: str
-    initial: float
-    final: float
-    max_rel_drift: float
+    initial: float | None = Field(description="I at the first sample (null: not finite)")
+    final: float | None = Field(description="I at the last sample (null: not finite)")
+    max_rel_drift: float | None = Field(description="null when I is not finite somewhere along the orbit")
     tolerance: float
     passed: bool = Field(description="the drift is within the tolerance of the system's own integrals")
     symbolic: ClaimSymbolic
+    not_finite_points: int = Field(0, description="samples and steps where I is not finite (a power of a negative "
+                                                  "number, a value past the floating-point range ...)")
 
 
 class SimulationResultModel(BaseModel):
@@ -159,9 +161,13 @@ class SimulationResultModel(BaseModel):
 
 def claims_to_json(evidence: list[Any]) -> list[dict[str, Any]]:
     """The JSON form of :class:`nonholonomic.evidence.claims.ClaimEvidence` items."""
-    return [{"name": c.name, "expression": c.expression, "initial": c.initial, "final": c.final,
-             "max_rel_drift": c.max_rel_drift, "tolerance": c.tolerance, "passed": c.passed,
-             "symbolic": {"identically_conserved": c.symbolic, "detail": c.symbolic_detail}} for c in evidence]
+    def finite(x: float) -> float | None:
+        return x if math.isfinite(x) else None
+
+    return [{"name": c.name, "expression": c.expression, "initial": finite(c.initial), "final": finite(c.final),
+             "max_rel_drift": finite(c.max_rel_drift), "tolerance": c.tolerance, "passed": c.passed,
+             "symbolic": {"identically_conserved": c.symbolic, "detail": c.symbolic_detail},
+             "not_finite_points": c.not_finite_points} for c in evidence]
 
 
 def system_units(system: MechanicalSystem) -> dict[str, str]:

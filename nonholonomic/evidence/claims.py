@@ -49,6 +49,8 @@ class ClaimEvidence:
     passed: bool
     symbolic: bool | None
     symbolic_detail: str
+    #: Samples and steps where ``I`` is not finite (its drift is then not finite, and ``passed`` False).
+    not_finite_points: int = 0
 
 
 def claim_names(system: MechanicalSystem) -> dict[str, sp.Symbol]:
@@ -60,6 +62,21 @@ def claim_names(system: MechanicalSystem) -> dict[str, sp.Symbol]:
 def parse_claim(system: MechanicalSystem, text: str) -> sp.Expr:
     """``I(x)`` from its text (raises :class:`nonholonomic.expressions.ExpressionError`)."""
     return parse_expression(text, claim_names(system))
+
+
+def claim_initial_problem(system: MechanicalSystem, parameters: np.ndarray, state: np.ndarray,
+                          text: str) -> str | None:
+    """Why a claim cannot be checked from ``state`` (the initial state): its value there is not a finite real
+    number (issue 34, item 3: refused at submission, not a job that always fails). None if it is."""
+    claim = parse_claim(system, text)
+    args = (*system.state_symbols, *system.parameter_symbols)
+    with np.errstate(all="ignore"):
+        value = complex(vectorize([claim], args)(np.asarray(state, dtype=float)[None, :], parameters)[0, 0])
+    if np.isfinite(value.real) and value.imag == 0:
+        return None
+    shown = value.real if value.imag == 0 else value
+    return (f"its value at the initial state is {shown}: a claim must be a finite real number there (a power of a "
+            "negative number, a logarithm of one, or a value past the floating-point range is not)")
 
 
 def derivative_along_field(system: MechanicalSystem, claim: sp.Expr) -> sp.Expr:
@@ -99,8 +116,12 @@ def claim_evidence(system: MechanicalSystem, parameters: np.ndarray, trajectory:
         with np.errstate(all="ignore"):
             values = vectorize([claim], args)(points, parameters)[:, 0]
         initial, final = float(values[0]), float(values[len(trajectory.t) - 1])
-        reference = max(abs(initial), float(np.max(np.abs(values)))) or 1.0
-        drift = float(np.max(np.abs(values - initial))) / reference
+        finite = np.isfinite(values)
+        if finite.all():
+            reference = max(abs(initial), float(np.max(np.abs(values)))) or 1.0
+            drift = float(np.max(np.abs(values - initial))) / reference
+        else:  # not finite somewhere along the orbit: no drift to speak of, and not passed
+            drift = float("nan")
         derivative = derivative_along_field(system, claim)
         skipped = over(operations(derivative), limits.max_proof_ops, "max_proof_ops", "dI/dt: the symbolic proof")
         if skipped is not None:
@@ -110,5 +131,5 @@ def claim_evidence(system: MechanicalSystem, parameters: np.ndarray, trajectory:
         out.append(ClaimEvidence(name=name, expression=text, initial=initial, final=final,
                                  max_rel_drift=drift, tolerance=tol,
                                  passed=bool(np.isfinite(drift) and drift <= tol), symbolic=proven,
-                                 symbolic_detail=detail))
+                                 symbolic_detail=detail, not_finite_points=int(np.count_nonzero(~finite))))
     return out

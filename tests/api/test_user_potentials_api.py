@@ -4,6 +4,8 @@ the field; the catalog says which names a U may use."""
 
 from __future__ import annotations
 
+import math
+
 from tests.api.conftest import BALL, job
 from tests.support import poll_job
 
@@ -84,3 +86,23 @@ def test_claims_come_back_with_their_evidence_and_a_bad_one_is_a_422(client):
     assert r.status_code == 422 and "claims[0].expression" in {e["field"] for e in r.json()["errors"]}
     r = client.post("/v1/jobs", json=job(claims=[{"name": "x", "expression": "M1"}] * 11))
     assert r.status_code == 422 and r.json()["errors"][0]["field"] == "claims"
+
+
+def test_a_claim_not_finite_at_the_initial_state_is_a_422_and_one_that_ends_not_finite_is_reported(client):
+    """Issue 34, item 3: a claim with no finite real value at the initial state would fail every job (its
+    evidence is non-finite from the first sample): refused at submission naming it. One finite there that
+    leaves the reals along the orbit no longer fails the job: its evidence says where it is not finite."""
+    # M2 = -0.2 at the conftest's initial state: a negative number to a non-integer power is not real
+    r = client.post("/v1/jobs", json=job(claims=[{"name": "bad", "expression": "M2**M3"}]))
+    assert r.status_code == 422, r.text
+    (error,) = r.json()["errors"]
+    assert error["field"] == "claims[0].expression" and "value at the initial state is" in error["reason"]
+    r = client.post("/v1/jobs", json=job(claims=[{"name": "huge", "expression": "exp(exp(exp(exp(M1 + 3))))"}]))
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "claims[0].expression", r.text
+    # log(gamma3): finite at gamma3 = 0.8, not real once gamma3 < 0 along this orbit (it reaches about -0.97)
+    body = job(t_final=20.0, claims=[{"name": "leaves", "expression": "log(gamma3)"}])
+    view = poll_job(client, client.post("/v1/jobs", json=body).headers["location"])
+    assert view["status"] == "succeeded", view["error"]
+    (claim,) = view["result"]["claims"]
+    assert claim["initial"] is not None and abs(claim["initial"] - math.log(0.8)) < 1e-12
+    assert claim["not_finite_points"] > 0 and claim["max_rel_drift"] is None and claim["passed"] is False
