@@ -29,6 +29,18 @@ class EmbeddedWorkers(BaseModel):
     threads: int
     warm: bool = Field(description="whether the kernels are compiled (warm-up done)")
     warm_up: WarmUpState | None = None
+    long_lane: LongLane | None = Field(None, description="jobs past embedded_long_after_s moved beside the threads")
+    let_go: int = Field(0, description="threads given up (stuck past a hard limit, or a cancelled job's inside a "
+                                       "compile) and replaced")
+
+
+class LongLane(BaseModel):
+    """Embedded mode's long lane: its size and the long jobs in it now."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    size: int
+    running: int
 
 
 class QueueWorker(BaseModel):
