@@ -73,6 +73,7 @@ from nonholonomic.hamiltonization.reducing_multiplier_density import (
     _reduce_cos_squares,
 )
 from nonholonomic.hamiltonization.theorem_1 import adj2, det2, prove_theorem_1
+from nonholonomic.numerics.precision import working_digits
 from nonholonomic.rational_trig import rational_trig_is_zero
 from nonholonomic.work_limits import WorkLimits, operations, over
 
@@ -186,7 +187,7 @@ class _Sampler:
         values = [self.values[s] for s in names]
 
         def evaluate(*x: float) -> list[Any]:
-            with mpmath.workdps(DIGITS):
+            with working_digits(DIGITS):
                 point = [mpmath.mpf(v) for v in list(x) + values]
                 shared = fn_integrals(*point) if fn_integrals is not None else ()
                 return [mpmath.mpmathify(r) for r in fn(*point, *shared)]
@@ -395,7 +396,7 @@ def _pointwise_flow(L: sp.Expr, q: tuple[sp.Symbol, sp.Symbol], v: tuple[sp.Symb
     field_py = generalized_chaplygin_bracket(S_bar, q, p).hamiltonian_vector_field(H_bar)
     f2 = sampler.function(list(field_py), list(q) + list(p))
     worst_t1 = worst_py = 0.0
-    with mpmath.workdps(DIGITS):
+    with working_digits(DIGITS):
         for qq, vv in zip(sampler.coordinates(points), sampler.velocities(points)):
             vals = f1(*qq, *vv)
             Gm = mpmath.matrix([[vals[0], vals[1]], [vals[2], vals[3]]])

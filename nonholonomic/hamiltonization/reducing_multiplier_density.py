@@ -16,6 +16,7 @@ from fractions import Fraction
 import numpy as np
 import sympy as sp
 
+from nonholonomic.numerics.precision import working_digits
 from nonholonomic.rational_trig import rational_trig_is_zero
 from nonholonomic.work_limits import MAX_INTEGRATE_OPS, operations, over
 
@@ -108,7 +109,8 @@ def _density_ansatz(A1: sp.Expr, A2: sp.Expr, extra: tuple[sp.Expr, ...], q: tup
         if rational_trig_is_zero(sp.diff(log_rho, qi) - target, q) is not True:
             return None
     # each factor's sign chosen positive at the base point (ρ is defined up to a constant factor)
-    at_base = sp.lambdify(list(q) + names, [f for _, f in used], modules="mpmath")(*BASE_POINT, *par)
+    with working_digits(15):  # mpmath's precision is global: at double precision, whatever other threads ask
+        at_base = sp.lambdify(list(q) + names, [f for _, f in used], modules="mpmath")(*BASE_POINT, *par)
     pieces = [((-f if float(s) < 0 else f) ** e) for (e, f), s in zip(used, at_base)]
     rho = sp.Mul(*pieces) * sp.exp(alpha[0] * q[0] + alpha[1] * q[1])
     return rho, ("ansatz rho = prod f_j^k_j exp(alpha.q) over the irreducible factors of A1, A2 and det G; exponents "

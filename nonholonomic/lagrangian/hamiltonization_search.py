@@ -29,6 +29,7 @@ from nonholonomic.expressions.smoothness import analytic_and_positive
 from nonholonomic.lagrangian.chaplygin import ChaplyginReduction, chaplygin_reduction
 from nonholonomic.lagrangian.equations import derive, tidy
 from nonholonomic.lagrangian.parse import KIND, LagrangianData
+from nonholonomic.numerics.precision import working_digits
 
 __all__ = ["Hamiltonization", "hamiltonization"]
 
@@ -100,7 +101,7 @@ def _same_field(data: LagrangianData, reduction: ChaplyginReduction) -> tuple[bo
         if sp.count_ops(difference) <= CANCEL_OPS and tidy(difference) == 0:
             continue
         user_at, reduced_at = (sp.lambdify(variables, e, modules="mpmath") for e in (user, reduced))
-        with mpmath.workdps(50):
+        with working_digits(50):
             for point in points:
                 a, b = user_at(*point), reduced_at(*point)
                 if abs(a - b) > mpmath.mpf(10) ** -40 * (abs(a) + 1):

@@ -38,6 +38,7 @@ import sympy as sp
 from nonholonomic.lagrangian.equations import derive, tidy
 from nonholonomic.lagrangian.parse import LagrangianData
 from nonholonomic.lagrangian.regular_forms import dependent_velocities
+from nonholonomic.numerics.precision import working_digits
 
 __all__ = ["SampledIntegrals", "SampledMeasure", "sampled_integrals", "sampled_measure"]
 
@@ -266,7 +267,7 @@ def _verify(residual_at: Any, data: LagrangianData, manifold: _Manifold, angles:
     """max over :data:`VERIFY_POINTS` random rational states of |residual| / its scale, at VERIFY_DIGITS digits."""
     rng = np.random.default_rng(20261129)
     worst = 0.0
-    with mpmath.workdps(VERIFY_DIGITS):
+    with working_digits(VERIFY_DIGITS):
         for _ in range(VERIFY_POINTS):
             q = [mpmath.mpf(int(rng.integers(300, 2800))) / 1000 if x in angles
                  else mpmath.mpf(int(rng.integers(-1000, 1000))) / 1000 for x in data.q]
