@@ -14,6 +14,7 @@ from typing import Any
 import sympy as sp
 
 from nonholonomic import bounded
+from nonholonomic.numerics.precision import working_digits
 from nonholonomic.work_limits import operations, over
 
 #: Largest 2-form (sympy operation count) for which monopole_charge tries sympy's exact integral: sympy's
@@ -116,7 +117,8 @@ def monopole_charge(S_bar: sp.Expr, q: tuple[sp.Symbol, sp.Symbol],
         # sympy's integrate does not return on large forms (the ball's S_bar): decided by size, not started
         out["detail"] += f"; {skipped}"
         return out
-    exact_domain = tuple(tuple(sp.nsimplify(x, [sp.pi]) for x in pair) for pair in domain)
+    with working_digits(15):  # nsimplify sets mpmath's global precision: take turns with other threads
+        exact_domain = tuple(tuple(sp.nsimplify(x, [sp.pi]) for x in pair) for pair in domain)
     # identical calls share one computation, cached per process (nonholonomic.bounded)
     outcome = bounded.run(("monopole", "symbolic_area_integral", (form, q, exact_domain)), _symbolic_area_integral,
                           (form, q, exact_domain))
