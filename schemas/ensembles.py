@@ -451,6 +451,31 @@ class EnsembleView(BaseModel):
                                                        "statistics, section points (over the members done so far)")
 
 
+class EnsembleListItem(BaseModel):
+    """One ensemble of the list: no request and no summary (``location`` has them)."""
+
+    id: str
+    status: JobStatus
+    progress: float = Field(ge=0, le=1, description="members done / members")
+    created_at: str
+    kind: str | None = Field(description="the system's kind")
+    members: int
+    members_done: int
+    label: str = Field(description="what varies across the members: 'list', 'level set' or 'sweep of D', "
+                                   "'grid (chaos map) of gamma1, M3' ...")
+    location: str = Field(description="the ensemble's URL, /v1/ensembles/{id}")
+
+
+class EnsembleList(BaseModel):
+    """A page of ensembles, newest first."""
+
+    items: list[EnsembleListItem]
+    next_cursor: str | None = Field(
+        description="pass as `cursor` for the next page; null at the end. With a status filter a page may hold "
+                    "fewer items than `limit` (even none) and still have a next cursor: a page reads `limit` "
+                    "ensembles")
+
+
 class MembersPage(BaseModel):
     """``GET /v1/ensembles/{id}/members``: members ``offset .. offset + limit - 1`` whose chunk is done."""
 

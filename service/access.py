@@ -16,7 +16,9 @@ address is the one answer a limited address still gets, and a key's length answe
 random, 32 bytes: ``openssl rand -hex 32``).
 Behind a reverse proxy the address is the proxy's
 unless uvicorn runs with ``--proxy-headers`` and the proxy is trusted (``--forwarded-allow-ips``).
-An unknown job id and another key's answer the same 404 after the same lookups (:func:`job_of`).
+An unknown job id and another key's answer the same 404 after the same lookups (:func:`job_of`). A job or an
+ensemble is also found by the first 6 or more characters of its id when they are the caller's only one
+that starts so (a 409 names the candidates otherwise).
 """
 
 from __future__ import annotations
@@ -32,9 +34,10 @@ from typing import TYPE_CHECKING, Any
 
 from fastapi import Request
 
-from schemas.problems import NOT_FOUND, RATE_LIMITED, UNAUTHORIZED
+from schemas.problems import CONFLICT, NOT_FOUND, RATE_LIMITED, UNAUTHORIZED
 from schemas.settings import Settings
 from service.errors import ProblemError
+from store.prefixes import is_prefix
 
 if TYPE_CHECKING:
     from service.backends.base import JobBackend, JobRecord
@@ -220,9 +223,22 @@ def job_of(backend: JobBackend, owner: str | None, job_id: str) -> JobRecord:
     timing tells nothing.
     """
     record = backend.find(job_id, owner)
+    if record is None and is_prefix(job_id):  # the first characters of an id (a progress bar shows 8)
+        full = _unique(backend.job_ids_with_prefix(job_id, owner), job_id, "job")
+        record = backend.find(full, owner) if full is not None else None
     if record is None or not visible(record.owner, owner):
         raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
     return record
+
+
+def _unique(found: list[str], prefix: str, what: str) -> str | None:
+    """The one id of ``found`` (those starting with ``prefix`` the caller may see), None if there is none;
+    a 409 naming them if there are several."""
+    if len(found) > 1:
+        shown = ", ".join(found[:5]) + (" ..." if len(found) > 5 else "")
+        raise ProblemError(409, "Ambiguous id prefix", f"{len(found)}{'+' if len(found) > 5 else ''} {what}s start "
+                           f"with {prefix!r}: {shown}; send more of the id", CONFLICT)
+    return found[0] if found else None
 
 
 def ensemble_of(backend: JobBackend, owner: str | None, ensemble_id: str) -> dict[str, Any]:
@@ -233,6 +249,9 @@ def ensemble_of(backend: JobBackend, owner: str | None, ensemble_id: str) -> dic
     """
     store = backend.ensembles
     record = None if owner is not None and not store.visible(ensemble_id, owner) else store.record(ensemble_id)
+    if record is None and is_prefix(ensemble_id):  # the first characters of an id (a progress bar shows 8)
+        full = _unique(store.with_prefix(ensemble_id, owner), ensemble_id, "ensemble")
+        record = store.record(full) if full is not None else None
     if record is None or not visible(record.get("owner"), owner):
         raise ProblemError(404, "Unknown ensemble", f"no ensemble with id {ensemble_id!r}", NOT_FOUND)
     return record

@@ -49,6 +49,28 @@ def view(ensemble_id: str, record: dict[str, Any]) -> dict[str, Any]:
             "summary": _summary(record["request"], digests) if digests else None}
 
 
+def members_label(request: dict[str, Any]) -> str:
+    """What varies across an ensemble's members, in a few words (the list's ``label``)."""
+    members = request.get("members") or {}
+    if members.get("sweep"):
+        return f"sweep of {members['sweep'].get('parameter')}"
+    if members.get("grid"):
+        return f"grid (chaos map) of {', '.join(members['grid'].get('coordinates') or [])}"
+    if members.get("sample"):
+        return "level set"
+    return "list"
+
+
+def list_item(record: dict[str, Any]) -> dict[str, Any]:
+    """An ensemble of ``GET /v1/ensembles``: its view's status and progress, without request or summary."""
+    shown = view(record["id"], record)
+    system = record["request"].get("system") or {}
+    return {"id": record["id"], "status": shown["status"], "progress": shown["progress"],
+            "created_at": record["created_at"], "kind": system.get("kind"), "members": shown["members"],
+            "members_done": shown["members_done"], "label": members_label(record["request"]),
+            "location": f"/v1/ensembles/{record['id']}"}
+
+
 def _summary(request: dict[str, Any], digests: list[dict[str, Any]]) -> dict[str, Any]:
     """The members' summary, with the map's (counts per status, chaotic fraction, thresholds) for a map."""
     summary = summarize(digests)

@@ -20,6 +20,7 @@ from store.expiry import Expiry
 from store.idempotency import KeyBinding, bind, unbind
 from store.jobs import UNSENT_GRACE_S
 from store.models import EnsembleChunkRow, EnsembleRow
+from store.prefixes import ids_with_prefix
 from store.statements import autocommit, changed_one
 
 _PENDING = exists().where(EnsembleChunkRow.ensemble_id == EnsembleRow.id, EnsembleChunkRow.done.is_(False))
@@ -135,13 +136,47 @@ class EnsembleStore:
                                             EnsembleChunkRow.members_done, EnsembleChunkRow.starts,
                                             EnsembleChunkRow.worker, EnsembleChunkRow.digests)
                                      .where(EnsembleChunkRow.ensemble_id == ensemble_id)).all()
-        return {"request": row.request, "created_at": row.created_at, "chunks": [tuple(c) for c in row.chunks],
+        return {"id": ensemble_id, "request": row.request, "created_at": row.created_at,
+                "chunks": [tuple(c) for c in row.chunks],
                 "owner": row.owner, "cancelled": row.cancelled,
                 "done": {c.chunk for c in chunks if c.done},
                 "progress": {c.chunk: c.members_done for c in chunks if c.starts and not c.done},
                 "digests": {c.chunk: c.digests for c in chunks if c.done},
                 "workers": {c.chunk: c.worker for c in chunks if c.done},
                 "starts": {c.chunk: c.starts for c in chunks if c.starts}}
+
+    def page(self, limit: int, after: tuple[float, str] | None,
+             owner: str | None = None) -> tuple[list[dict[str, Any]], bool]:
+        """Ensembles newest first by ``(created, id)``, strictly after ``after``, only those ``owner`` may see
+        if given (its own and those without an owner): each as :meth:`record` gives it, with ``id`` and
+        ``created`` (two queries for the page). Returns the page and whether more follow."""
+        query = select(EnsembleRow)
+        if after is not None:
+            score, last = after
+            query = query.where(or_(EnsembleRow.created < score,
+                                    and_(EnsembleRow.created == score, EnsembleRow.id < last)))
+        if owner is not None:
+            query = query.where(or_(EnsembleRow.owner == owner, EnsembleRow.owner.is_(None)))
+        query = query.order_by(EnsembleRow.created.desc(), EnsembleRow.id.desc()).limit(limit + 1)
+        with self._session() as session:
+            rows = list(session.scalars(query))
+            more, rows = len(rows) > limit, rows[:limit]
+            chunks = session.execute(select(EnsembleChunkRow.ensemble_id, EnsembleChunkRow.chunk,
+                                            EnsembleChunkRow.done, EnsembleChunkRow.members_done,
+                                            EnsembleChunkRow.starts)
+                                     .where(EnsembleChunkRow.ensemble_id.in_([r.id for r in rows]))).all()
+        by_id: dict[str, list[Any]] = {}
+        for c in chunks:
+            by_id.setdefault(c.ensemble_id, []).append(c)
+        return [{"id": r.id, "created": r.created, "request": r.request, "created_at": r.created_at,
+                 "chunks": [tuple(c) for c in r.chunks], "owner": r.owner, "cancelled": r.cancelled,
+                 "done": {c.chunk for c in by_id.get(r.id, []) if c.done},
+                 "progress": {c.chunk: c.members_done for c in by_id.get(r.id, []) if c.starts and not c.done},
+                 "digests": {}, "workers": {}, "starts": {}} for r in rows], more
+
+    def with_prefix(self, prefix: str, owner: str | None, limit: int = 6) -> list[str]:
+        """Ids starting with ``prefix`` (hex digits and dashes only) that ``owner`` may see, at most ``limit``."""
+        return ids_with_prefix(self._session, EnsembleRow, prefix, owner, limit)
 
     def visible(self, ensemble_id: str, owner: str) -> bool:
         """Whether ``owner`` may see the ensemble (its own, or one without an owner): one indexed

@@ -23,6 +23,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from store.expiry import Expiry
 from store.idempotency import KeyBinding, KeyBound, KeyInProgress, bind, delete_expired as delete_expired_keys, unbind
 from store.models import JobRow
+from store.prefixes import ids_with_prefix
 from store.statements import autocommit, changed_one
 
 log = logging.getLogger(__name__)
@@ -371,6 +372,10 @@ class JobStore:
             return set()
         with self.engine.connect() as connection:
             return set(connection.scalars(select(_JOBS.c.id).where(_JOBS.c.id.in_(job_ids))))
+
+    def with_prefix(self, prefix: str, owner: str | None, limit: int = 6) -> list[str]:
+        """Ids starting with ``prefix`` (hex digits and dashes only) that ``owner`` may see, at most ``limit``."""
+        return ids_with_prefix(self._session, JobRow, prefix, owner, limit)
 
     def status(self, job_id: str) -> str | None:
         with self.engine.connect() as connection:

@@ -250,12 +250,16 @@ class Client(SymbolicRoutes):
         dict
             ``{items: [{id, status, progress, created_at, kind, location}], next_cursor}``.
         """
+        return self._page("/v1/jobs", status, limit, cursor)
+
+    def _page(self, path: str, status: str | None, limit: int, cursor: str | None) -> dict[str, Any]:
+        """A page of a list (``GET /v1/jobs`` or ``/v1/ensembles``)."""
         params: dict[str, Any] = {"limit": limit}
         if status is not None:
             params["status"] = status
         if cursor is not None:
             params["cursor"] = cursor
-        return self._json("GET", "/v1/jobs", params=params)
+        return self._json("GET", path, params=params)
 
     def cancel(self, job_id: str) -> dict[str, Any]:
         """``DELETE /v1/jobs/{id}``: cancel a job (a running one stops at its next progress report).
@@ -292,6 +296,31 @@ class Client(SymbolicRoutes):
             The ensemble id.
         """
         return str(self._json("POST", "/v1/ensembles", json=request)["id"])
+
+    def ensembles(self, status: str | None = None, limit: int = 50, cursor: str | None = None) -> dict[str, Any]:
+        """``GET /v1/ensembles``: a page of ensembles, newest first (the key's own, with API keys).
+
+        Parameters
+        ----------
+        status : str, optional
+            Only ensembles in this status (queued, running, succeeded, failed, cancelled).
+        limit : int, default 50
+            Ensembles read for the page (at most 500; with ``status`` a page may hold fewer).
+        cursor : str, optional
+            The previous page's ``next_cursor``.
+
+        Returns
+        -------
+        dict
+            ``{items: [{id, status, progress, created_at, kind, members, members_done, label, location}],
+            next_cursor}``; ``label`` says what varies across the members (``sweep of D`` ...).
+
+        Notes
+        -----
+        Every method taking an ensemble's or a job's id also takes its first characters (6 or more, as the
+        progress bar shows 8) when no other of yours starts so.
+        """
+        return self._page("/v1/ensembles", status, limit, cursor)
 
     def ensemble(self, ensemble_id: str) -> dict[str, Any]:
         """``GET /v1/ensembles/{id}``: status, progress, chunks and summary.

@@ -78,6 +78,13 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "(.csv or .nc); implies --wait")
     p.set_defaults(func=commands.ensemble)
 
+    p = sub.add_parser("list", help="list your jobs or ensembles, newest first")
+    p.add_argument("what", choices=("jobs", "ensembles"))
+    p.add_argument("--status", choices=("queued", "running", "succeeded", "failed", "cancelled"),
+                   help="only those in this status")
+    p.add_argument("--limit", type=_positive, default=20, help="at most this many (default %(default)s)")
+    p.set_defaults(func=commands.listing)
+
     p = sub.add_parser("report", help="run the paper report and save its HTML page")
     p.add_argument("--claims", metavar="IDS", help="comma-separated claim ids (GET /v1/paper/claims); default all")
     p.add_argument("--out", metavar="FILE", required=True, help="where to write the HTML page")

@@ -1,4 +1,4 @@
-"""The client-side commands of ``nonholonomic``: ``systems``, ``run``, ``ensemble``, ``report`` (``serve``
+"""The client-side commands of ``nonholonomic``: ``systems``, ``run``, ``ensemble``, ``list``, ``report`` (``serve``
 and ``worker`` start the server's processes: :mod:`nonholonomic_client.processes`).
 
 Each takes the parsed arguments and returns an exit code; errors are raised (:class:`UsageError`,
@@ -18,7 +18,13 @@ from typing import Any
 
 from nonholonomic_client.api import Client, Progress
 from nonholonomic_client.progress import ProgressBar
-from nonholonomic_client.summaries import ensemble_summary, job_summary, report_summary, systems_table
+from nonholonomic_client.summaries import (
+    ensemble_summary,
+    job_summary,
+    listing_table,
+    report_summary,
+    systems_table,
+)
 
 
 class UsageError(Exception):
@@ -158,6 +164,26 @@ def ensemble(args: argparse.Namespace) -> int:
             print(f"section written to {path}")
     summary = view.get("summary") or {}
     return 1 if summary.get("members") and not summary.get("succeeded") else 0
+
+
+def listing(args: argparse.Namespace) -> int:
+    """``nonholonomic list jobs|ensembles [--status S] [--limit N]``: the newest first, whole ids (any unique
+    first characters of one also name it)."""
+    rows: list[tuple[str, ...]]
+    header: tuple[str, ...]
+    with _client(args) as api:
+        if args.what == "jobs":
+            page = api.jobs(status=args.status, limit=args.limit)
+            rows = [(i["id"], i["status"], f"{i['progress']:.0%}", i["created_at"][:19], i["kind"] or "")
+                    for i in page["items"]]
+            header = ("id", "status", "progress", "created (UTC)", "kind")
+        else:
+            page = api.ensembles(status=args.status, limit=args.limit)
+            rows = [(i["id"], i["status"], f"{i['members_done']}/{i['members']}", i["created_at"][:19],
+                     i["kind"] or "", i["label"]) for i in page["items"]]
+            header = ("id", "status", "members", "created (UTC)", "kind", "members are")
+    print(listing_table(header, rows) if rows else f"no {args.what}")
+    return 0
 
 
 def report(args: argparse.Namespace) -> int:

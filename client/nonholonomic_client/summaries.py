@@ -20,6 +20,11 @@ def _table(rows: Sequence[Sequence[str]], indent: str = "") -> list[str]:
     return [indent + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
 
 
+def listing_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """``nonholonomic list``'s table: a header in capitals, then one row per job or ensemble."""
+    return "\n".join(_table([tuple(h.upper() for h in header), *rows]))
+
+
 def systems_table(catalog: Mapping[str, Any]) -> str:
     """The catalog as a table: kind, state vectors, title.
 

@@ -298,6 +298,9 @@ class EmbeddedBackend:
         jobs, more = self.store.page(status, limit, after, owner)
         return [self._record(j) for j in jobs], encode_cursor(jobs[-1].created, jobs[-1].id) if more else None
 
+    def job_ids_with_prefix(self, prefix: str, owner: str | None) -> list[str]:
+        return self.store.with_prefix(prefix, owner)
+
     def active_jobs(self, owner: str) -> int:
         return self.store.active_count(owner)
 

@@ -229,6 +229,9 @@ class QueueBackend:
             celery_app.control.revoke(job_id)
         return self.get(job_id)
 
+    def job_ids_with_prefix(self, prefix: str, owner: str | None) -> list[str]:
+        return self.store.with_prefix(prefix, owner)
+
     def active_jobs(self, owner: str) -> int:
         return self.store.active_count(owner)
 

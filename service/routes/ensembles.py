@@ -8,16 +8,26 @@ from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
-from schemas.ensembles import EnsembleAccepted, EnsembleRequest, EnsembleView, MembersPage
-from schemas.problems import CONFLICT
+from schemas.ensembles import (
+    EnsembleAccepted,
+    EnsembleList,
+    EnsembleListItem,
+    EnsembleRequest,
+    EnsembleView,
+    MembersPage,
+)
+from schemas.job_list import DEFAULT_LIMIT, MAX_LIMIT, STATUSES
+from schemas.problems import CONFLICT, FieldError
 from service.access import ensemble_of
 from service.admission import admit_ensemble
+from service.backends.base import InvalidCursor, decode_cursor, encode_cursor
 from service.deps import AppSettings, Backend, Owner
-from service.ensembles import all_members, members_page, section_csv, section_netcdf, section_npz, view
+from service.ensembles import all_members, list_item, members_page, section_csv, section_netcdf, section_npz, view
 from service.errors import (
     INVALID,
     UNAVAILABLE_BACKEND,
     ProblemError,
+    invalid_request,
     problem_responses,
 )
 from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses, vector_components
@@ -60,10 +70,39 @@ async def submit_ensemble(body: EnsembleRequest, request: Request, backend: Back
     return await run_in_threadpool(idempotent, request, owner, spec, create, respond)
 
 
+@router.get("", operation_id="ensembles-list", response_model=EnsembleList,
+            responses=problem_responses({422: "invalid `status`, `limit` or `cursor`; `errors` names the field",
+                                         503: UNAVAILABLE_BACKEND}),
+            summary="List ensembles, newest first (no requests, no summaries; page with next_cursor)")
+def list_ensembles(backend: Backend, owner: Owner,
+                   status: str | None = Query(None, description=f"only ensembles with this status: "
+                                                                f"{', '.join(STATUSES)}",
+                                              json_schema_extra={"enum": list(STATUSES)}),
+                   limit: int = Query(DEFAULT_LIMIT, ge=1, le=MAX_LIMIT, description="ensembles read for the page"),
+                   cursor: str | None = Query(None, description="a previous page's next_cursor, as it is"),
+                   ) -> EnsembleList:
+    """Every ensemble the caller may see (with API keys: the key's own), newest first: id, status,
+    progress, created_at, kind, members, what varies across them (``label``), location. An ensemble is
+    also found by the first characters of its id: ``GET /v1/ensembles/168413ee``."""
+    if status is not None and status not in STATUSES:
+        raise invalid_request([FieldError(field="status", reason=f"{status!r} is not an ensemble status; one of "
+                                                                 f"{', '.join(STATUSES)}")])
+    try:
+        after = decode_cursor(cursor) if cursor is not None else None
+    except InvalidCursor as exc:
+        raise invalid_request([FieldError(field="cursor", reason=str(exc))]) from None
+    records, more = backend.ensembles.page(limit, after, owner)
+    items = [list_item(r) for r in records]
+    next_cursor = encode_cursor(records[-1]["created"], records[-1]["id"]) if more else None
+    return EnsembleList(items=[EnsembleListItem(**i) for i in items if status is None or i["status"] == status],
+                        next_cursor=next_cursor)
+
+
 @router.get("/{ensemble_id}", operation_id="ensembles-get", response_model=EnsembleView, responses=_ERRORS,
             summary="Status, progress (members done / total) and summary of an ensemble")
 def get_ensemble(ensemble_id: str, backend: Backend, owner: Owner) -> JSONResponse:
-    return JSONResponse(view(ensemble_id, ensemble_of(backend, owner, ensemble_id)))
+    record = ensemble_of(backend, owner, ensemble_id)  # by its id, or the first characters of it
+    return JSONResponse(view(record["id"], record))
 
 
 @router.get("/{ensemble_id}/members", operation_id="ensembles-members", response_model=MembersPage,
@@ -74,6 +113,7 @@ def get_members(ensemble_id: str, backend: Backend, owner: Owner, offset: int = 
     """Members ``offset .. offset + limit - 1`` that are done, each with its index, label, status and
     the same result fields as a job."""
     record = ensemble_of(backend, owner, ensemble_id)
+    ensemble_id = record["id"]  # the whole id, also when the path gave its first characters
     page = members_page(backend.ensembles, ensemble_id, record, offset, limit)
     total = sum(stop - start for start, stop in record["chunks"])
     components = vector_components(record["request"]["system"])
@@ -92,6 +132,7 @@ def get_section(ensemble_id: str, request: Request, backend: Backend, owner: Own
                                        "or netcdf (dimension crossing; coordinates member, t, tau)")) -> Response:
     """The members done so far, in index order, each member's crossings in time order."""
     record = ensemble_of(backend, owner, ensemble_id)
+    ensemble_id = record["id"]  # the whole id, also when the path gave its first characters
     if not record["request"].get("poincare"):
         raise ProblemError(409, "No section", "this ensemble did not ask for a poincare section", CONFLICT)
     store = backend.ensembles
@@ -118,6 +159,7 @@ def get_map(ensemble_id: str, request: Request, backend: Backend, owner: Owner,
     from service.map_exports import map_csv, map_json, map_netcdf
 
     record = ensemble_of(backend, owner, ensemble_id)
+    ensemble_id = record["id"]  # the whole id, also when the path gave its first characters
     if not record["request"].get("indicators"):
         raise ProblemError(409, "Not a map", "this ensemble is not a chaos map (no members.grid and indicators)",
                            CONFLICT)
@@ -137,6 +179,7 @@ def get_map(ensemble_id: str, request: Request, backend: Backend, owner: Owner,
                summary="Cancel every chunk of an ensemble")
 def cancel_ensemble(ensemble_id: str, backend: Backend, owner: Owner) -> JSONResponse:
     record = ensemble_of(backend, owner, ensemble_id)
+    ensemble_id = record["id"]  # the whole id, also when the path gave its first characters
     before = view(ensemble_id, record)
     if before["status"] in ("succeeded", "failed"):
         raise ProblemError(409, "Ensemble already finished", f"ensemble {ensemble_id} already {before['status']}",

@@ -124,6 +124,7 @@ def get_trajectory(job_id: str, request: Request, backend: Backend, owner: Owner
     state and derived vector, ``M1 [kg m^2/s]`` ... NetCDF: dimension ``t``, coordinates ``t`` and ``tau``,
     one variable per component named as the CSV's columns (``M1`` ...) with ``units`` and ``long_name``."""
     record = _succeeded(backend, owner, job_id, "trajectory")
+    job_id = record.id  # the whole id, also when the path gave its first characters
     result = record.result
     assert result is not None
     filename = f"job-{job_id}-trajectory.{SUFFIXES[format]}"  # the id as a safe name
@@ -156,6 +157,7 @@ def get_section(job_id: str, request: Request, backend: Backend, owner: Owner,
     each vector ``(count, 3)``, ``coordinates`` ``(count, 2)``, ``units_json``, ``request_json``,
     ``versions_json``, ``section_json``. NetCDF: dimension ``crossing``, coordinates ``t`` and ``tau``."""
     record = _succeeded(backend, owner, job_id, "section")
+    job_id = record.id
     result = record.result
     assert result is not None
     if not result.get("poincare"):
@@ -181,6 +183,7 @@ def get_section(job_id: str, request: Request, backend: Backend, owner: Owner,
 def cancel_job(job_id: str, backend: Backend, owner: Owner) -> JSONResponse:
     """A queued job never starts; a running one stops at its next progress report (≤ 0.2 s)."""
     before = job_of(backend, owner, job_id)
+    job_id = before.id  # the whole id, also when the path gave its first characters
     if before.status in ("succeeded", "failed"):
         raise ProblemError(409, "Job already finished", f"job {job_id} already {before.status}", CONFLICT)
     after = backend.cancel(job_id)

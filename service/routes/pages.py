@@ -100,6 +100,7 @@ def report_html(record: JobRecord) -> HTMLResponse:
 def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Request, backend: Backend,
                    owner: Owner) -> Response:
     record = job_of(backend, owner, job_id)
+    job_id = record.id
     result = record.result
     if record.status != "succeeded" or result is None:
         raise ProblemError(409, "No result yet", f"job {job_id} is {record.status}; its plots are there once it "
@@ -122,6 +123,7 @@ def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Req
 def ensemble_page(ensemble_id: str, backend: Backend, owner: Owner) -> HTMLResponse:
     """Reloads itself every 2 s while chunks are queued or running."""
     record = ensemble_of(backend, owner, ensemble_id)
+    ensemble_id = record["id"]
     members = members_page(backend.ensembles, ensemble_id, record, 0, PAGE_MEMBERS)
     return HTMLResponse(render_ensemble(view(ensemble_id, record), members, request_units(record["request"])))
 
@@ -136,6 +138,7 @@ def ensemble_plot_route(ensemble_id: str, name: EnsemblePlotName, fmt: PlotForma
                         backend: Backend, owner: Owner) -> Response:
     """Drawn from the members of the chunks done so far; cached by that set of chunks."""
     record = ensemble_of(backend, owner, ensemble_id)
+    ensemble_id = record["id"]
     current = view(ensemble_id, record)
     if not record["done"]:
         raise ProblemError(409, "No members yet", f"ensemble {ensemble_id} is {current['status']} and no chunk has "

@@ -238,3 +238,24 @@ def test_cli_report_saves_the_page(base, api, tmp_path):
     assert done.returncode == 0, done.stderr
     assert "holds after correction 2" in done.stdout
     assert "Paper report" in (tmp_path / "r.html").read_text()
+
+
+def test_the_client_lists_ensembles_and_finds_one_by_its_first_characters(api):
+    """Issue 35, item 1: after a crash the progress bar's 8 characters are enough."""
+    ensemble_id = api.submit_ensemble(ENSEMBLE)
+    api.wait_ensemble(ensemble_id, timeout=120)
+    page = api.ensembles(limit=5)
+    assert page["items"][0]["id"] == ensemble_id and page["items"][0]["members"] == 4
+    assert api.ensemble(ensemble_id[:8])["id"] == ensemble_id
+    assert api.members(ensemble_id[:8])["total"] == 4
+
+
+def test_cli_lists_jobs_and_ensembles_with_whole_ids(base, api, ball_job):
+    ensemble_id = api.submit_ensemble(ENSEMBLE)
+    api.wait_ensemble(ensemble_id, timeout=120)
+    done = _cli(base, "list", "ensembles", "--limit", "3")
+    assert done.returncode == 0, done.stderr
+    header, first = done.stdout.splitlines()[:2]
+    assert header.split()[:3] == ["ID", "STATUS", "MEMBERS"] and first.split()[:3] == [ensemble_id, "succeeded", "4/4"]
+    jobs = _cli(base, "list", "jobs", "--status", "succeeded")
+    assert jobs.returncode == 0 and ball_job[0] in jobs.stdout, jobs.stdout
