@@ -291,7 +291,9 @@ def members_frame(members: Iterable[Mapping[str, Any]],
                   names: Mapping[str, Sequence[str]] | None = None) -> pandas.DataFrame:
     """An ensemble's members as a table, one row per member indexed by ``member``.
 
-    Columns: ``status``, ``t_final``, ``tau_final``, ``initial_M1`` ... and ``final_M1`` ... (a system of one's
+    Columns: ``status``; what sets the member apart: a sweep's value named after its parameter (``D``,
+    ``inertia[1]``), a chaos map cell's ``cell_i``, ``cell_j``, its two coordinates (``gamma1``, ``M3``) and
+    ``branches``; ``t_final``, ``tau_final``, ``initial_M1`` ... and ``final_M1`` ... (a system of one's
     own: ``initial_x``, ``final_theta_dot`` ..., by ``names``, the members page's ``components``),
     ``drift_<integral>`` (each integral's max relative drift), ``checks_passed``, ``exponent_1`` ...
     (the Lyapunov exponents asked for), ``section_points`` and ``error``.
@@ -310,7 +312,7 @@ def members_frame(members: Iterable[Mapping[str, Any]],
     pd = _pandas()
     rows = []
     for m in members:
-        row: dict[str, Any] = {"member": m["index"], "status": m.get("status"),
+        row: dict[str, Any] = {"member": m["index"], "status": m.get("status"), **_label_columns(m.get("label")),
                                "t_final": m.get("t_final"), "tau_final": m.get("tau_final")}
         for when in ("initial", "final"):
             state = {k: [v] for k, v in (m.get(f"{when}_state") or {}).items()}
@@ -329,6 +331,22 @@ def members_frame(members: Iterable[Mapping[str, Any]],
     if not rows:  # no member done yet: the table's shape without rows
         return pd.DataFrame({"status": pd.Series(dtype=object)}, index=pd.Index([], name="member"))
     return pd.DataFrame(rows).set_index("member")
+
+
+def _label_columns(label: Mapping[str, Any] | None) -> dict[str, Any]:
+    """A member's label as columns: ``{parameter: value}`` of a sweep; a grid cell's indices, coordinates and
+    branches (issue 35, item 2: the table carries what was swept, no join with the request needed)."""
+    if not label:
+        return {}
+    if "parameter" in label:
+        return {str(label["parameter"]): label.get("value")}
+    out: dict[str, Any] = {}
+    for key, value in label.items():
+        if key == "cell" and isinstance(value, (list, tuple)) and len(value) == 2:
+            out["cell_i"], out["cell_j"] = value
+        else:
+            out[str(key)] = value
+    return out
 
 
 def exponents_frame(lyapunov: Mapping[str, Any]) -> pandas.DataFrame:

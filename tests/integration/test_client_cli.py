@@ -259,3 +259,25 @@ def test_cli_lists_jobs_and_ensembles_with_whole_ids(base, api, ball_job):
     assert header.split()[:3] == ["ID", "STATUS", "MEMBERS"] and first.split()[:3] == [ensemble_id, "succeeded", "4/4"]
     jobs = _cli(base, "list", "jobs", "--status", "succeeded")
     assert jobs.returncode == 0 and ball_job[0] in jobs.stdout, jobs.stdout
+
+
+def test_a_sweeps_and_a_maps_members_table_carries_what_varies(api):
+    """Issue 35, item 2: lambda_1 against D, or a map's cells, straight from the members table (no join)."""
+    sweep = api.submit_ensemble({"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+                                 "members": {"sweep": {"parameter": "D", "values": [0.1, 0.4, 0.9],
+                                                       "initial_state": {"M": [0.5, -0.2, 0.1],
+                                                                         "gamma": [0.0, 0.6, 0.8]}}},
+                                 "t_final": 5.0, "samples": 3, "lyapunov": {"count": 1}})
+    api.wait_ensemble(sweep, timeout=120)
+    table = api.members(sweep, format="pandas")
+    assert list(table.columns[:2]) == ["status", "D"] and table["D"].tolist() == [0.1, 0.4, 0.9]
+    assert table["exponent_1"].notna().all()
+    chaos_map = api.submit_ensemble({"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+                                     "t_final": 5.0, "indicators": ["megno"],
+                                     "members": {"grid": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
+                                                          "level": {"energy": 2.0, "area": 0.0}, "shape": [2, 3]}}})
+    api.wait_ensemble(chaos_map, timeout=120)
+    cells = api.members(chaos_map, format="pandas")
+    assert list(cells.columns[1:6]) == ["cell_i", "cell_j", "gamma1", "M3", "branches"]
+    assert [(int(i), int(j)) for i, j in zip(cells["cell_i"], cells["cell_j"])] == [(k // 3, k % 3) for k in range(6)]
+    assert cells["gamma1"].nunique() == 2 and cells["M3"].nunique() == 3  # two rows of cells, three columns
