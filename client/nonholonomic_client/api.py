@@ -518,6 +518,33 @@ class Client(SymbolicRoutes):
             return data
         return frames.map_dataset(data, self.ensemble(ensemble_id))
 
+    def periodic_orbit(self, job_id: str, format: Literal["pandas", "json"] = "pandas",  # noqa: A002
+                       ) -> dict[str, Any] | pandas.DataFrame:
+        """A job's periodic orbit (it asked for ``periodic_orbit``) and its continuation.
+
+        Parameters
+        ----------
+        job_id : str
+            The job's id (or its first characters).
+        format : {"pandas", "json"}, default "pandas"
+            ``pandas`` (the ``[notebook]`` extra): one row per parameter value of the continuation, indexed
+            by the parameter's name (``D``): ``status``, ``period_t``, ``trace``, ``stability``, ``residual``,
+            ``checks_passed``, the section multipliers, and ``fold`` / ``period_doubling`` / ``lost``
+            flags on the first point past each bifurcation; the orbit, the events and the skipped values
+            in ``attrs`` (:func:`nonholonomic_client.frames.periodic_orbit_frame`). ``json``: the result's
+            ``periodic_orbit``.
+
+        Raises
+        ------
+        ApiError
+            If the job has not succeeded, or asked for no periodic orbit.
+        """
+        orbit = self._succeeded(self.job(job_id, trajectory=False), job_id).get("periodic_orbit")
+        if orbit is None:
+            raise ApiError({"type": "/problems/conflict", "title": "No periodic orbit", "status": None,
+                            "detail": f"job {job_id} asked for no periodic orbit (request.periodic_orbit)"})
+        return orbit if format == "json" else frames.periodic_orbit_frame(orbit)
+
     def exponents(self, ident: str, format: Literal["json", "pandas"] = "pandas", *,  # noqa: A002
                   of: Literal["job", "ensemble"] | None = None) -> dict[str, Any] | pandas.DataFrame:
         """The Lyapunov exponents of a job (its spectrum) or of an ensemble (each member's).

@@ -428,3 +428,51 @@ def map_dataset(data: Mapping[str, Any], view: Mapping[str, Any]) -> xarray.Data
              else float("nan"),
              "request": json.dumps(view.get("request", {}))}
     return xr.Dataset(variables, coords=coords, attrs=attrs)
+
+
+def periodic_orbit_frame(orbit: Mapping[str, Any]) -> pandas.DataFrame:
+    """A job's periodic orbit and its continuation as a table, one row per parameter value (issue 35, item 4).
+
+    The index is the continued parameter, named after it (``D``); without a continuation, one row at the
+    orbit's own (index ``orbit``). Columns: ``status``, ``period_t`` [s], ``trace``, ``stability``,
+    ``residual``, ``checks_passed``, each section multiplier's ``multiplier_k_re``, ``_im`` and
+    ``_modulus``, and the bifurcations, each flagged on the first point past it: ``fold``,
+    ``period_doubling``, ``lost``. ``attrs`` keeps the orbit (surface, period, level, multipliers, checks,
+    reason), the events with their details and the values skipped after the branch was lost.
+
+    Parameters
+    ----------
+    orbit : mapping
+        A result's ``periodic_orbit``.
+
+    Returns
+    -------
+    pandas.DataFrame
+    """
+    pd = _pandas()
+    continuation = orbit.get("continuation")
+    if continuation:
+        points, name = list(continuation.get("points") or []), str(continuation.get("parameter"))
+        events = list(continuation.get("events") or [])
+    else:
+        points, name, events = [{**orbit, "value": "orbit", "checks_passed": None}], "orbit", []
+    rows = []
+    for point in points:
+        row: dict[str, Any] = {name: point.get("value")}
+        for key in ("status", "period_t", "trace", "stability", "residual", "checks_passed"):
+            row[key] = point.get(key)
+        for k, m in enumerate(point.get("section_multipliers") or []):
+            for part in ("re", "im", "modulus"):
+                row[f"multiplier_{k + 1}_{part}"] = m.get(part)
+        for kind in ("fold", "period_doubling", "lost"):
+            row[kind] = any(e.get("kind") == kind and (e.get("between") or [None, None])[-1] == point.get("value")
+                            for e in events)
+        rows.append(row)
+    frame = pd.DataFrame(rows).set_index(name)
+    frame.attrs = {"orbit": {k: orbit.get(k) for k in ("status", "reason", "surface", "value", "direction", "period",
+                                                       "level", "period_t", "period_tau", "multipliers", "trace",
+                                                       "stability", "checks", "warnings")},
+                   "events": events, "skipped": list((continuation or {}).get("skipped") or []),
+                   "units": {"period_t": "s", **dict(orbit.get("units") or {})}}
+    return frame
+

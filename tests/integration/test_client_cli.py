@@ -281,3 +281,26 @@ def test_a_sweeps_and_a_maps_members_table_carries_what_varies(api):
     assert list(cells.columns[1:6]) == ["cell_i", "cell_j", "gamma1", "M3", "branches"]
     assert [(int(i), int(j)) for i, j in zip(cells["cell_i"], cells["cell_j"])] == [(k // 3, k % 3) for k in range(6)]
     assert cells["gamma1"].nunique() == 2 and cells["M3"].nunique() == 3  # two rows of cells, three columns
+
+
+def test_a_periodic_orbit_and_its_continuation_as_a_table(api, ball_job):
+    """Issue 35, item 4: the branch through its period doubling, one row per value, flagged where it happened."""
+    from tests.api.test_periodic_orbits_api import LINEAR, SEED
+
+    job_id = api.submit({"system": LINEAR, "initial_state": SEED, "t_final": 50.0, "samples": 11,
+                         "project_initial_state": True,
+                         "periodic_orbit": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
+                                            "sweep": {"parameter": "potential.a[2]", "values": [0.7, 0.8, 0.9, 1.0]}}})
+    api.wait(job_id, timeout=300)
+    branch = api.periodic_orbit(job_id)
+    assert branch.index.name == "potential.a[2]" and branch.index.tolist() == [0.7, 0.8, 0.9, 1.0]
+    assert branch["status"].tolist() == ["found"] * 4 and branch["checks_passed"].all()
+    assert branch["period_doubling"].tolist() == [False, False, True, False] and not branch["fold"].any()
+    orbit = api.periodic_orbit(job_id, format="json")
+    first = orbit["continuation"]["points"][0]
+    assert branch["period_t"].iloc[0] == first["period_t"] and branch["trace"].iloc[0] == first["trace"]
+    assert branch["multiplier_1_modulus"].iloc[0] == first["section_multipliers"][0]["modulus"]
+    assert branch.attrs["orbit"]["stability"] == "elliptic" and branch.attrs["events"][0]["kind"] == "period_doubling"
+    with pytest.raises(ApiError) as caught:
+        api.periodic_orbit(ball_job[0])
+    assert "asked for no periodic orbit" in caught.value.detail
