@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -53,13 +54,18 @@ def execute(path: Path, url: str, out: Path | None) -> float:
         Seconds it took.
     """
     import nbformat
+    from jupyter_client.manager import KernelManager
     from nbclient import NotebookClient
 
     book = nbformat.read(path, as_version=4)
     os.environ["NONHOLONOMIC_URL"] = url
     start = time.monotonic()
-    NotebookClient(book, timeout=CELL_TIMEOUT_S, kernel_name="python3", resources={"metadata": {"path": str(ROOT)}},
-                   record_timing=False).execute()
+    # IPC (Unix sockets in a folder of its own, by absolute path: the kernel runs in ROOT), not TCP: the kernel
+    # is local, and ipykernel warns at every start that TCP is unencrypted
+    with tempfile.TemporaryDirectory(prefix="nonholonomic-kernel-") as sockets:
+        manager = KernelManager(kernel_name="python3", transport="ipc", ip=os.path.join(sockets, "kernel"))
+        NotebookClient(book, km=manager, timeout=CELL_TIMEOUT_S, kernel_name="python3",
+                       resources={"metadata": {"path": str(ROOT)}}, record_timing=False).execute()
     if out is not None:
         nbformat.write(book, out)
     return time.monotonic() - start

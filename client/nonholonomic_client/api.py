@@ -25,7 +25,7 @@ import numpy as np
 from nonholonomic_client import frames
 from nonholonomic_client.base import DEFAULT_URL, TERMINAL, Progress, default_url
 from nonholonomic_client.errors import ApiError, JobFailed
-from nonholonomic_client.progress import TqdmProgress
+from nonholonomic_client.progress import notebook_progress
 from nonholonomic_client.symbolic import SymbolicRoutes
 
 if TYPE_CHECKING:
@@ -165,7 +165,7 @@ class Client(SymbolicRoutes):
             t_final = (first.get("request") or {}).get("t_final")
             simulated = isinstance(t_final, int | float)  # a report job has no t_final: a bare bar
             total = cast(float, t_final) if simulated else 1.0
-            with TqdmProgress(total, "s" if simulated else None, label=job_id[:8]) as bar:
+            with notebook_progress(total, "s" if simulated else None, label=job_id[:8]) as bar:
                 view = self._wait("job", summary, job_id, timeout, poll, bar)
         else:
             view = self._wait("job", summary, job_id, timeout, poll, progress or None)
@@ -361,7 +361,7 @@ class Client(SymbolicRoutes):
             If it is not finished after ``timeout``.
         """
         if progress is True:
-            with TqdmProgress(float(self.ensemble(ensemble_id).get("members") or 1), "members",
+            with notebook_progress(float(self.ensemble(ensemble_id).get("members") or 1), "members",
                               label=ensemble_id[:8]) as bar:
                 return self._wait("ensemble", self.ensemble, ensemble_id, timeout, poll, bar)
         return self._wait("ensemble", self.ensemble, ensemble_id, timeout, poll, progress or None)

@@ -173,3 +173,76 @@ class TqdmProgress:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _in_kernel_without_widgets() -> bool:
+    """Whether this runs in a Jupyter kernel that cannot draw tqdm's widget (no ipywidgets): tqdm's text
+    would then arrive as one stderr line per redraw, stacked in the notebook (issue 35, item 5)."""
+    import importlib.util
+
+    try:
+        from IPython import get_ipython
+    except ImportError:
+        return False
+    shell = get_ipython()
+    return shell is not None and "IPKernelApp" in shell.config and importlib.util.find_spec("ipywidgets") is None
+
+
+class NotebookLine:
+    """A callable ``progress(fraction, status)`` drawing one text line in a notebook, updated in place (an
+    IPython display handle): Jupyter shows one moving line, and an executed notebook keeps its last state,
+    ``100% succeeded``, as one output (the rendered tutorials). Redrawn at most every 0.2 s, at each new
+    status and at the end.
+
+    Parameters
+    ----------
+    total : float
+        What a fraction of 1 stands for (e.g. ``t_final``).
+    unit : str or None
+        Its unit (``"s"`` simulated, ``"members"``); None: no counts.
+    label : str, optional
+        Written before the bar (the id's first characters).
+    """
+
+    def __init__(self, total: float, unit: str | None, label: str = "") -> None:
+        from IPython.display import Pretty, display
+
+        self._pretty = Pretty
+        self.total = float(total) if total and math.isfinite(total) and total > 0 else 1.0
+        self.unit, self.label = unit, label
+        self._start = self._drawn = time.monotonic()
+        self._last = (0.0, "")
+        self.handle = display(Pretty(self._text(0.0, "")), display_id=True)
+
+    def _text(self, fraction: float, status: str) -> str:
+        counts = "" if self.unit is None else f" {fraction * self.total:.4g}/{self.total:.4g} {self.unit}"
+        bar = render_bar(fraction, status, time.monotonic() - self._start)
+        return f"{self.label + ' ' if self.label else ''}{bar}{counts}"
+
+    def __call__(self, fraction: float, status: str) -> None:
+        f = 0.0 if not math.isfinite(fraction) else min(max(fraction, 0.0), 1.0)
+        now = time.monotonic()
+        if status != self._last[1] or now - self._drawn >= 0.2 or f >= 1.0:
+            self._drawn, self._last = now, (f, status)
+            if self.handle is not None:
+                self.handle.update(self._pretty(self._text(f, status)))
+
+    def close(self) -> None:
+        """Draw the last state once more (its final elapsed time)."""
+        if self.handle is not None:
+            self.handle.update(self._pretty(self._text(*self._last)))
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def notebook_progress(total: float, unit: str | None, label: str = "") -> TqdmProgress | NotebookLine:
+    """``progress=True``'s bar: tqdm.auto (a widget in Jupyter with ipywidgets, text on a terminal), or one
+    updating line in a Jupyter kernel without ipywidgets (:class:`NotebookLine`)."""
+    if _in_kernel_without_widgets():
+        return NotebookLine(total, unit, label)
+    return TqdmProgress(total, unit, label)
+

@@ -121,6 +121,16 @@ print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r
         outputs = [o for c in book.cells if c.cell_type == "code" for o in c.outputs]
         assert not [o for o in outputs if o.output_type == "error"], path.name
         assert any(o.output_type == "execute_result" for o in outputs), path.name
+    # a wait's progress: one line updated in place (issue 35, item 5), not a stderr block of redraws
+    first = _read(executed / "first-job.ipynb")
+    waits = [c for c in first.cells if c.cell_type == "code" and "progress=True" in c.source]
+    assert waits, "first-job.ipynb waits with progress=True"
+    for cell in waits:
+        assert not [o for o in cell.outputs if o.output_type == "stream" and o.name == "stderr"], cell.outputs
+        lines = [o for o in cell.outputs if o.output_type == "display_data" and "100% succeeded" in
+                 o.get("data", {}).get("text/plain", "")]
+        assert len(lines) == 1, cell.outputs
+    assert "without encryption" not in run.stderr  # the kernels run over IPC
     section = _read(executed / "section-and-exponents.ipynb")
     pictures = [o for c in section.cells for o in getattr(c, "outputs", []) if "image/png" in o.get("data", {})]
     assert len(pictures) == 2  # the section and the running estimates, drawn
