@@ -64,8 +64,12 @@ def execute(path: Path, url: str, out: Path | None) -> float:
     # is local, and ipykernel warns at every start that TCP is unencrypted
     with tempfile.TemporaryDirectory(prefix="nonholonomic-kernel-") as sockets:
         manager = KernelManager(kernel_name="python3", transport="ipc", ip=os.path.join(sockets, "kernel"))
-        NotebookClient(book, km=manager, timeout=CELL_TIMEOUT_S, kernel_name="python3",
-                       resources={"metadata": {"path": str(ROOT)}}, record_timing=False).execute()
+        try:
+            NotebookClient(book, km=manager, timeout=CELL_TIMEOUT_S, kernel_name="python3",
+                           resources={"metadata": {"path": str(ROOT)}}, record_timing=False).execute()
+        finally:  # a kernel manager given to nbclient is the caller's to stop
+            if manager.has_kernel:
+                manager.shutdown_kernel(now=True)
     if out is not None:
         nbformat.write(book, out)
     return time.monotonic() - start
