@@ -64,7 +64,7 @@ HAMILTONIZE = {"coordinates": ["x", "y"], "velocities": ["a", "b"], "L": "(a**2 
 def test_numeric_hazards_in_a_hamiltonization_are_never_a_500(fuzz_client):
     seen: dict[int, int] = {}
 
-    @settings(FUZZ, max_examples=max(EXAMPLES // 2, 10))
+    @settings(FUZZ, max_examples=max(EXAMPLES // 3, 10))
     @given(field=st.sampled_from(["L", "a1", "a2", "b", "potential"]), text=_numeric_hazards(["x", "y"]))
     def check(field: str, text: str) -> None:
         body = {**HAMILTONIZE, field: text if field != "L" else f"(a**2 + b**2)/2 + {text}"}
@@ -78,7 +78,7 @@ def test_numeric_hazards_in_a_hamiltonization_are_never_a_500(fuzz_client):
 def test_numeric_hazards_in_a_bracket_are_never_a_500(fuzz_client):
     seen: dict[int, int] = {}
 
-    @settings(FUZZ, max_examples=max(EXAMPLES // 2, 10))
+    @settings(FUZZ, max_examples=max(EXAMPLES // 3, 10))
     @given(text=_numeric_hazards(["x", "y", "z"]), where=st.sampled_from(["entry", "casimir"]))
     def check(text: str, where: str) -> None:
         matrix = [["0", "z", "-y"], ["-z", "0", "x"], ["y", "-x", "0"]]
@@ -140,7 +140,7 @@ def test_numeric_hazards_in_an_explored_potential_are_never_a_500(fuzz_client, c
     seen: dict[int, int] = {}
     ball = next(e for e in catalog if e["kind"] == "chaplygin_ball")
 
-    @settings(FUZZ, max_examples=max(EXAMPLES // 3, 8))
+    @settings(FUZZ, max_examples=max(EXAMPLES // 6, 8))
     @given(text=_numeric_hazards(ball["potential_expression"]["variables"]))
     def check(text: str) -> None:
         system = {**ball["example"]["system"], "potential": {"kind": "expression", "U": text, "parameters": {}}}

@@ -52,9 +52,9 @@ BODY = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.
         "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 20.0, "samples": 11}
 #: Keyed POSTs of the drill in each mode, the client threads sending them, and the API's SIGKILLs: one
 #: each time another KILL_EVERY keys have been answered.
-DRILL_KEYS = {"queue": 300, "embedded": 200}
+DRILL_KEYS = {"queue": 250, "embedded": 150}
 CLIENTS = 8
-KILLS = 6
+KILLS = 4
 
 
 def _answering(base: str) -> None:
