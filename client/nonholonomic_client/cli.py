@@ -67,15 +67,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="submit a simulation job (SPEC: a JSON request; - reads stdin)")
     p.add_argument("spec", metavar="SPEC")
     p.add_argument("--wait", action="store_true", help="wait with a progress bar, then print a summary")
-    p.add_argument("--out", metavar="FILE", help="write the trajectory (.csv, .npz or .json; implies --wait)")
+    p.add_argument("--out", metavar="FILE", help="write the trajectory (.csv, .npz, .nc or .json; implies --wait)")
     p.add_argument("--result", metavar="FILE", help="write the result as JSON (implies --wait)")
     p.set_defaults(func=commands.run)
 
     p = sub.add_parser("ensemble", help="submit an ensemble (SPEC: a JSON request; - reads stdin)")
     p.add_argument("spec", metavar="SPEC")
     p.add_argument("--wait", action="store_true", help="wait with a progress bar, then print a summary")
-    p.add_argument("--out", metavar="FILE", help="write the Poincare section (.csv or .npz), or a chaos map's cells "
-                                                 "(.csv or .nc); implies --wait")
+    p.add_argument("--out", metavar="FILE", help="write the Poincare section (.csv, .npz or .nc), or a chaos map's "
+                                                 "cells (.csv or .nc); implies --wait")
     p.set_defaults(func=commands.ensemble)
 
     p = sub.add_parser("list", help="list your jobs or ensembles, newest first")

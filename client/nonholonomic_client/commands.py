@@ -116,7 +116,7 @@ def systems(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """``nonholonomic run SPEC [--wait] [--out FILE] [--result FILE]``: submit a job, maybe wait for it."""
-    fmt = out_format(args.out, ("csv", "npz", "json"))
+    fmt = out_format(args.out, ("csv", "npz", "json", "nc"))
     spec = read_spec(args.spec)
     with _client(args) as api:
         job_id = api.submit(spec)
@@ -130,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
             Path(args.result).write_text(json.dumps(view["result"], indent=1) + "\n", encoding="utf-8")
             print(f"result written to {args.result}")
         if args.out:
-            path = api.trajectory(job_id, fmt, out=args.out)  # type: ignore[arg-type]  # fmt: a suffix allowed
+            path = api.trajectory(job_id, "netcdf" if fmt == "nc" else fmt,  # type: ignore[arg-type]  # a suffix allowed
+                                  out=args.out)
             assert isinstance(path, Path)  # with out: the file written
             print(f"trajectory written to {path}")
     return 0
@@ -144,7 +145,7 @@ def ensemble(args: argparse.Namespace) -> int:
     """
     spec = read_spec(args.spec)
     chaos_map = isinstance(spec, dict) and bool(spec.get("indicators"))
-    fmt = out_format(args.out, ("csv", "nc") if chaos_map else ("csv", "npz"))
+    fmt = out_format(args.out, ("csv", "nc") if chaos_map else ("csv", "npz", "nc"))
     if fmt and not chaos_map and isinstance(spec, dict) and not spec.get("poincare"):
         raise UsageError("--out writes the Poincare section: the spec asks for none (add \"poincare\")")
     with _client(args) as api:
@@ -159,7 +160,8 @@ def ensemble(args: argparse.Namespace) -> int:
             assert isinstance(path, Path)  # with out: the file written
             print(f"map written to {path}")
         elif args.out:
-            path = api.section(ensemble_id, fmt, out=args.out)  # type: ignore[arg-type]  # fmt: a suffix allowed
+            path = api.section(ensemble_id, "netcdf" if fmt == "nc" else fmt,  # type: ignore[arg-type]  # a suffix
+                               out=args.out)
             assert isinstance(path, Path)  # with out: the file written
             print(f"section written to {path}")
     summary = view.get("summary") or {}

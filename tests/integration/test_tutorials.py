@@ -67,6 +67,11 @@ def _client_cell_imports() -> list[str]:
     return sorted(found)
 
 
+#: A small job whose trajectory the client-only environment reads back from NetCDF.
+NETCDF_JOB = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
+              "initial_state": {"M": [0.5, -0.2, 0.1], "gamma": [0.0, 0.6, 0.8]}, "t_final": 5.0, "samples": 11}
+
+
 def _run(args: list[str], cwd: Path, timeout: float = 900) -> subprocess.CompletedProcess:
     """A command in ``cwd`` (not the repository: its folders must not be what is imported)."""
     return subprocess.run(args, capture_output=True, text=True, timeout=timeout, check=False, cwd=cwd)
@@ -97,7 +102,7 @@ print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r
     assert run.returncode == 0, run.stderr[-3000:]
     out = json.loads(run.stdout.strip().splitlines()[-1])
     assert out["server"] == [] and out["tops"] == [], out
-    assert {"httpx", "numpy", "pandas", "xarray", "tqdm", "nonholonomic-client"} <= set(out["names"])
+    assert {"httpx", "numpy", "pandas", "xarray", "tqdm", "netcdf4", "nonholonomic-client"} <= set(out["names"])
     assert "matplotlib" not in out["names"] and "ipykernel" not in out["names"]
     modules = _client_cell_imports()
     assert "nonholonomic_client" in modules and "matplotlib" not in modules, modules
@@ -106,6 +111,24 @@ print(json.dumps({{"names": names, "server": [n for n in {SERVER_DISTRIBUTIONS!r
     cli = str(env_dir / "bin" / "nonholonomic")
     systems = _run([cli, "--url", base, "systems"], tmp_path, timeout=60)
     assert systems.returncode == 0 and "chaplygin_ball" in systems.stdout, systems.stderr
+    # NetCDF opens wherever the client is (issue 35, item 3): the CLI's .nc, read by xarray, equal to the JSON
+    (tmp_path / "job.json").write_text(json.dumps(NETCDF_JOB))
+    done = _run([cli, "--url", base, "run", "job.json", "--out", "traj.nc"], tmp_path, timeout=300)
+    assert done.returncode == 0 and "trajectory written to traj.nc" in done.stdout, done.stderr[-3000:]
+    job_id = done.stdout.split()[1]
+    check = f"""
+import numpy as np, xarray as xr
+from nonholonomic_client import Client
+with Client({base!r}) as api:
+    reference = api.trajectory({job_id!r}, format="xarray")
+with xr.open_dataset("traj.nc") as ds:
+    assert ds["M1"].attrs["units"] == "kg m^2/s", ds["M1"].attrs
+    for name in ("M1", "M2", "M3", "gamma1", "gamma2", "gamma3"):
+        assert np.array_equal(ds[name].values, reference[name].values), name
+    print("netcdf ok", ds.sizes["t"])
+"""
+    opened = _run([python, "-c", check], tmp_path, timeout=120)
+    assert opened.returncode == 0 and "netcdf ok 11" in opened.stdout, opened.stderr[-3000:]
     serve = _run([cli, "serve"], tmp_path, timeout=60)
     assert serve.returncode == 2 and "needs the server" in serve.stderr and "pip install -e ." in serve.stderr
 
