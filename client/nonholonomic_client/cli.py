@@ -78,6 +78,17 @@ def build_parser() -> argparse.ArgumentParser:
                                                  "cells (.csv or .nc); implies --wait")
     p.set_defaults(func=commands.ensemble)
 
+    p = sub.add_parser("get", help="save an existing job's or ensemble's results (ID: the id or its first "
+                                   "characters)")
+    p.add_argument("ident", metavar="ID")
+    p.add_argument("--out", metavar="FILE", required=True,
+                   help="where to write; the suffix names the format: a job's trajectory or section (.csv, .npz, "
+                        ".nc, .json), an ensemble's section (.csv, .npz, .nc), a chaos map (.csv, .nc, .json)")
+    p.add_argument("--what", choices=("trajectory", "section", "map", "result"),
+                   help="what to save (default: a job's trajectory, an ensemble's section, a chaos map's map; "
+                        "result: the job's whole result, or the ensemble's view, as .json)")
+    p.set_defaults(func=commands.get)
+
     p = sub.add_parser("list", help="list your jobs or ensembles, newest first")
     p.add_argument("what", choices=("jobs", "ensembles"))
     p.add_argument("--status", choices=("queued", "running", "succeeded", "failed", "cancelled"),

@@ -1,5 +1,5 @@
-"""The client-side commands of ``nonholonomic``: ``systems``, ``run``, ``ensemble``, ``list``, ``report`` (``serve``
-and ``worker`` start the server's processes: :mod:`nonholonomic_client.processes`).
+"""The client-side commands of ``nonholonomic``: ``systems``, ``run``, ``ensemble``, ``get``, ``list``,
+``report`` (``serve`` and ``worker`` start the server's processes: :mod:`nonholonomic_client.processes`).
 
 Each takes the parsed arguments and returns an exit code; errors are raised (:class:`UsageError`,
 :class:`nonholonomic_client.errors.ApiError`) and turned into messages and exit codes by
@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from nonholonomic_client.api import Client, Progress
+from nonholonomic_client.errors import ApiError
 from nonholonomic_client.progress import ProgressBar
 from nonholonomic_client.summaries import (
     ensemble_summary,
@@ -166,6 +167,45 @@ def ensemble(args: argparse.Namespace) -> int:
             print(f"section written to {path}")
     summary = view.get("summary") or {}
     return 1 if summary.get("members") and not summary.get("succeeded") else 0
+
+
+#: What ``get`` writes, by what is asked for: the suffixes each takes.
+GET_FORMATS = {("job", "trajectory"): ("csv", "npz", "nc", "json"), ("job", "section"): ("csv", "npz", "nc", "json"),
+               ("job", "result"): ("json",), ("ensemble", "section"): ("csv", "npz", "nc"),
+               ("ensemble", "map"): ("csv", "nc", "json"), ("ensemble", "result"): ("json",)}
+
+
+def get(args: argparse.Namespace) -> int:
+    """``nonholonomic get ID --out FILE [--what W]``: an existing job's trajectory, section or result, or an
+    ensemble's section, map or view, in the format the suffix names (issue 35, item 3)."""
+    with _client(args) as api:
+        try:
+            view: dict[str, Any] = api.job(args.ident, trajectory=False)
+            what_is = "job"
+        except ApiError as exc:
+            if exc.status != 404:
+                raise
+            view, what_is = api.ensemble(args.ident), "ensemble"
+        ident = str(view["id"])  # the whole id, also when ID gave its first characters
+        chaos_map = what_is == "ensemble" and bool((view.get("request") or {}).get("indicators"))
+        what = args.what or ("trajectory" if what_is == "job" else "map" if chaos_map else "section")
+        allowed = GET_FORMATS.get((what_is, what))
+        if allowed is None:
+            raise UsageError(f"a {what_is} has no {what}; a job: trajectory, section, result; an ensemble: "
+                             "section, map, result")
+        fmt = out_format(args.out, allowed)
+        server_format = {"nc": "netcdf"}.get(fmt or "", fmt)
+        if what == "result":
+            body = api.job(ident)["result"] if what_is == "job" else api.ensemble(ident)
+            Path(args.out).write_text(json.dumps(body, indent=1) + "\n", encoding="utf-8")
+        elif what == "trajectory":
+            api.trajectory(ident, server_format, out=args.out)  # type: ignore[arg-type]  # a suffix allowed
+        elif what == "section":
+            api.section(ident, server_format, out=args.out, of=what_is)  # type: ignore[arg-type]  # a suffix allowed
+        else:
+            api.chaos_map(ident, server_format, out=args.out)  # type: ignore[arg-type]  # a suffix allowed
+    print(f"{what_is} {ident}: {what} written to {args.out}")
+    return 0
 
 
 def listing(args: argparse.Namespace) -> int:

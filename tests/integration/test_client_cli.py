@@ -304,3 +304,22 @@ def test_a_periodic_orbit_and_its_continuation_as_a_table(api, ball_job):
     with pytest.raises(ApiError) as caught:
         api.periodic_orbit(ball_job[0])
     assert "asked for no periodic orbit" in caught.value.detail
+
+
+def test_cli_get_saves_an_existing_jobs_and_ensembles_results(base, api, ball_job, tmp_path):
+    """Issue 35, item 3: results fetched again later, by id or its first characters, in the suffix's format."""
+    job_id = ball_job[0]
+    done = _cli(base, "get", job_id[:8], "--out", "traj.nc", cwd=tmp_path)
+    assert done.returncode == 0 and f"job {job_id}: trajectory written to traj.nc" in done.stdout, done.stderr
+    assert (tmp_path / "traj.nc").read_bytes()[:4] == b"\x89HDF"  # NetCDF-4 is HDF5
+    done = _cli(base, "get", job_id, "--what", "result", "--out", "result.json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert json.loads((tmp_path / "result.json").read_text())["final_state"] == ball_job[1]["result"]["final_state"]
+    ensemble_id = api.submit_ensemble(ENSEMBLE)
+    api.wait_ensemble(ensemble_id, timeout=120)
+    done = _cli(base, "get", ensemble_id, "--out", "section.csv", cwd=tmp_path)
+    assert done.returncode == 0 and "section written" in done.stdout, done.stderr
+    rows = list(csv.reader(io.StringIO((tmp_path / "section.csv").read_text())))
+    assert rows[0][0] == "member" and len(rows) > 1
+    wrong = _cli(base, "get", ensemble_id, "--out", "x.json", cwd=tmp_path)
+    assert wrong.returncode == 2 and ".csv, .npz, .nc" in wrong.stderr, wrong.stderr
