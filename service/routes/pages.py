@@ -6,6 +6,7 @@ from __future__ import annotations
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
+from itertools import islice
 from typing import Literal
 
 from fastapi import APIRouter, Request, Response
@@ -124,7 +125,11 @@ def ensemble_page(ensemble_id: str, backend: Backend, owner: Owner) -> HTMLRespo
     """Reloads itself every 2 s while chunks are queued or running."""
     record = ensemble_of(backend, owner, ensemble_id)
     ensemble_id = record["id"]
-    members = members_page(backend.ensembles, ensemble_id, record, 0, PAGE_MEMBERS)
+    if record["request"].get("indicators"):  # a chaos map: its cells inside the level first (issue 35, item 6)
+        members = list(islice((m for m in all_members(backend.ensembles, ensemble_id, record)
+                               if (m.get("cell") or {}).get("status", m.get("status")) != "outside"), PAGE_MEMBERS))
+    else:
+        members = members_page(backend.ensembles, ensemble_id, record, 0, PAGE_MEMBERS)
     return HTMLResponse(render_ensemble(view(ensemble_id, record), members, request_units(record["request"])))
 
 

@@ -52,6 +52,20 @@ def test_the_integrable_ball_is_regular_in_every_cell(client):
     assert cell["initial_state"]["gamma"][2] == 0.0 and set(cell["label"]) == {"cell", "gamma1", "M3", "branches"}
 
 
+
+def test_the_pages_cell_table_shows_the_cells_inside_the_level(client):
+    """Issue 35, item 6: a map drawn wider than its level began its table with rows of 'outside'."""
+    grid = {**GRID, "shape": [10, 8], "ranges": [[-1.5, 1.5], [-12.0, 12.0]]}
+    view, members = run(client, chaos_map(BALL, t_final=20.0, members={"grid": grid}))
+    assert view["summary"]["map"]["outside"] > 10 and members[0]["cell"]["status"] == "outside"
+    page = client.get(f"/v1/ensembles/{view['id']}/page").text
+    table = page[page.index('<table id="cells">'):]
+    table = table[:table.index("</table>")]
+    inside = [c["index"] for c in members if c["cell"]["status"] != "outside"]
+    assert table.count('<tr id="member-') == min(50, len(inside)) and 'class="outside"' not in table
+    assert f'id="member-{inside[0]}"' in table and "inside the level" in page
+
+
 def test_the_linear_field_shows_its_chaotic_sea_and_the_exports_carry_the_members_numbers(client):
     view, members = run(client, chaos_map(LINEAR, t_final=300.0))
     m = view["summary"]["map"]

@@ -45,6 +45,8 @@ def test_the_island_centre_with_its_continuation_through_a_period_doubling(clien
     assert page.status_code == 200
     for words in ("Periodic orbit", "elliptic", "period doubling", "closes_independently", "Continuation in"):
         assert words in page.text, words
+    # its figure (multipliers and the branch side by side) spans the page, not a half-width card (issue 35, item 6)
+    assert '<figure class="wide"><a href="/v1/jobs/' in page.text and "plots/periodic_orbit.svg" in page.text
     image = client.get(f"/v1/jobs/{view['id']}/plots/periodic_orbit.png")
     assert image.status_code == 200 and image.content[:4] == b"\x89PNG"
     assert client.get(f"/v1/jobs/{view['id']}/plots/periodic_orbit.svg").text.lstrip().startswith("<?xml")
