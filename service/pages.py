@@ -33,7 +33,9 @@ JOB_PLOT_CAPTIONS = {
 ENSEMBLE_PLOT_CAPTIONS = {
     "poincare": "every member's section points, one colour per member",
     "exponents": "largest Lyapunov exponent of each member, a finite-time estimate (against the swept parameter, "
-                 "or a histogram); the members not converged are drawn apart",
+                 "or a histogram); the members not converged are drawn apart. The dotted line is ln T / T: a regular "
+                 "orbit's finite-time exponent decays to 0 only like ln t / t, so an integrable system's members sit "
+                 "near it at T, and still move (\"not converged\") however long the run",
     "map": "the chaos map: each indicator on the section plane, one cell per pixel (grey: outside the level, red: "
            "failed); the colour bar marks the threshold above which a cell is chaotic",
 }

@@ -107,6 +107,12 @@ def _ensemble_exponents_figure(view: Mapping[str, Any], members: Iterable[Mappin
     fig = _new_figure(8.0, 5.0)
     ax = fig.add_subplot(1, 1, 1)
     ylabel = "largest Lyapunov exponent λ₁ [1/s], finite-time estimate"
+    t_end = float(spectra[0].get("t_final") or request.get("t_final") or 0.0)
+    # a regular orbit's finite-time λ₁ decays to 0 only like ln t / t: at the run's end it is still about this
+    regular_scale = float(np.log(t_end) / t_end) if t_end > np.e else None
+    regular_label = (None if regular_scale is None else
+                     f"ln T / T = {regular_scale:.3g} 1/s at T = {t_end:g} s: where a regular orbit's "
+                     "λ₁ still is (it decays like ln t / t)")
     if sweep:
         x = np.asarray(swept)
         order = np.argsort(x, kind="stable")
@@ -115,6 +121,8 @@ def _ensemble_exponents_figure(view: Mapping[str, Any], members: Iterable[Mappin
         if bad.any():
             ax.plot(x[bad], y[bad], "o", markerfacecolor="white", color="C3", markersize=5, label="not converged")
         ax.axhline(0.0, color="0.5", linewidth=0.6)
+        if regular_scale is not None:
+            ax.axhline(regular_scale, color="C2", linestyle=":", linewidth=1.2, label=regular_label)
         path = sweep["parameter"]
         match = SWEEP_PATH.match(path.strip())
         unit = units.get(match.group(1)) if match else None
@@ -131,11 +139,15 @@ def _ensemble_exponents_figure(view: Mapping[str, Any], members: Iterable[Mappin
         ax.set_xlim(low - 0.02 * (high - low), high + 0.02 * (high - low))
         median = float(np.median(y))
         ax.axvline(median, color="k", linestyle="--", linewidth=1.0, label=f"median {median:.4g} 1/s")
+        if regular_scale is not None:
+            ax.axvline(regular_scale, color="C2", linestyle=":", linewidth=1.5, label=regular_label)
+            high = max(high, regular_scale)
+            ax.set_xlim(low - 0.02 * (high - low), high + 0.02 * (high - low))
         ax.set_xlabel(ylabel)
         ax.set_ylabel("members")
         ax.yaxis.set_major_locator(MaxNLocator(integer=True))
         what = f"largest Lyapunov exponents of {len(y)} members: finite-time estimates at {when}"
-    ax.legend(loc="best")
+    ax.legend(loc="best" if sweep else "upper left", fontsize="small")
     ax.set_title(verdict, color="C3" if bad.any() else "0.3")
     ax.grid(alpha=0.3)
     fig.suptitle(_headline(info, what))

@@ -174,6 +174,9 @@ def test_the_exponent_histogram_says_finite_time_and_which_have_not_converged(lo
     assert sum(p.get_height() for p in ax.patches) == len(members)
     labels = ax.get_legend_handles_labels()[1]
     assert "converged (4)" in labels and "not converged (2)" in labels
+    # where a regular orbit's finite-time exponent still is at T: ln T / T (issue 35, item 6)
+    reference = [line for line in ax.get_lines() if line.get_label().startswith("ln T / T")]
+    assert len(reference) == 1 and reference[0].get_xdata()[0] == pytest.approx(np.log(300.0) / 300.0, rel=1e-12)
     texts = _svg_texts(plots.ensemble_plot("exponents", view, members, "svg"))
     assert "finite-time estimates at t = 300 s" in texts and "2 of 6 not converged" in texts
     settled = _members(result["lyapunov"], [False] * 6)
