@@ -22,7 +22,16 @@ from service.access import ensemble_of
 from service.admission import admit_ensemble
 from service.backends.base import InvalidCursor, decode_cursor, encode_cursor
 from service.deps import AppSettings, Backend, Owner
-from service.ensembles import all_members, list_item, members_page, section_csv, section_netcdf, section_npz, view
+from service.ensembles import (
+    all_members,
+    list_item,
+    members_page,
+    request_units,
+    section_csv,
+    section_netcdf,
+    section_npz,
+    view,
+)
 from service.errors import (
     INVALID,
     UNAVAILABLE_BACKEND,
@@ -32,6 +41,7 @@ from service.errors import (
 )
 from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses, vector_components
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
+from service.members_table import members_csv
 from service.openapi import operation_id
 from service.validation import POOL_FULL, validated
 from store.idempotency import KeyBinding
@@ -106,17 +116,29 @@ def get_ensemble(ensemble_id: str, backend: Backend, owner: Owner) -> JSONRespon
 
 
 @router.get("/{ensemble_id}/members", operation_id="ensembles-members", response_model=MembersPage,
-            responses={**_ERRORS, **problem_responses({422: f"offset < 0, or limit outside 1 .. {MAX_PAGE}"})},
-            summary="A page of member results")
-def get_members(ensemble_id: str, backend: Backend, owner: Owner, offset: int = Query(0, ge=0),
-                limit: int = Query(100, ge=1, le=MAX_PAGE)) -> JSONResponse:
+            responses={**_ERRORS,  # JSON (the model) first: a generated client reads pages; CSV with format=csv
+                       200: {"description": "a page of members (JSON), or every member done as one table (format=csv)",
+                             "content": {MEDIA_TYPES["csv"]: {"schema": {"type": "string"}}}},
+                       **problem_responses({422: f"offset < 0, limit outside 1 .. {MAX_PAGE}, or an unknown format"})},
+            summary="A page of member results (JSON), or every member as a CSV table")
+def get_members(ensemble_id: str, request: Request, backend: Backend, owner: Owner, offset: int = Query(0, ge=0),
+                limit: int = Query(100, ge=1, le=MAX_PAGE),
+                format: Literal["json", "csv"] = Query(  # noqa: A002
+                    "json", description="json: members offset .. offset + limit - 1; csv: every member done, one row "
+                                        "each, with what sets it apart (a sweep's value named after its parameter, a "
+                                        "map cell's indices and coordinates)")) -> Response:
     """Members ``offset .. offset + limit - 1`` that are done, each with its index, label, status and
-    the same result fields as a job."""
+    the same result fields as a job; or (``format=csv``) every member done as one table
+    (:mod:`service.members_table`)."""
     record = ensemble_of(backend, owner, ensemble_id)
     ensemble_id = record["id"]  # the whole id, also when the path gave its first characters
+    components = vector_components(record["request"]["system"])
+    if format == "csv":
+        rows = members_csv(all_members(backend.ensembles, ensemble_id, record), components,
+                           request_units(record["request"]))
+        return download(request, rows, MEDIA_TYPES["csv"], f"ensemble-{ensemble_id}-members.csv")
     page = members_page(backend.ensembles, ensemble_id, record, offset, limit)
     total = sum(stop - start for start, stop in record["chunks"])
-    components = vector_components(record["request"]["system"])
     return JSONResponse({"offset": offset, "limit": limit, "total": total, "components": components, "members": page})
 
 

@@ -66,3 +66,32 @@ def test_a_job_or_an_ensemble_is_found_by_the_first_characters_of_its_id(app_wit
     assert ambiguous.status_code == 409 and "2 jobs start with 'abcdef00'" in ambiguous.json()["detail"]
     unique = client.get("/v1/jobs/abcdef00-1", headers=A)
     assert unique.status_code == 200 and unique.json()["id"] == "abcdef00-1111-4000-8000-000000000002"
+
+
+def test_the_members_csv_carries_the_swept_value_and_the_jsons_numbers(app_with):
+    """Issue 35, item 2: the members as one table, the sweep's value in a column named after its parameter."""
+    import csv
+    import io
+
+    client = app_with()
+    r = client.post("/v1/ensembles", json=_sweep())
+    _finished_any(client, r.headers["location"])
+    table = client.get(f"{r.headers['location']}/members", params={"format": "csv"})
+    assert table.status_code == 200 and table.headers["content-type"].startswith("text/csv"), table.text
+    rows = list(csv.DictReader(io.StringIO(table.text)))
+    swept = next(h for h in rows[0] if h.split(" ")[0] == "D")
+    assert [float(row[swept]) for row in rows] == [0.1, 0.2] and [row["member"] for row in rows] == ["0", "1"]
+    members = client.get(f"{r.headers['location']}/members").json()["members"]
+    for row, member in zip(rows, members, strict=True):
+        assert float(row["final_M1 [kg m^2/s]"]) == member["final_state"]["M"][0]  # repr: read back exactly
+        assert float(row["drift_energy"]) == member["integrals"][0]["max_rel_drift"]
+    assert list(rows[0])[:3] == ["member", "status", swept] and rows[0]["status"] == "succeeded"
+
+
+def _finished_any(client, location: str) -> None:
+    import time
+
+    deadline = time.monotonic() + 300  # a hang guard
+    while client.get(location).json()["status"] != "succeeded":
+        assert time.monotonic() < deadline, f"hang guard: {location} not succeeded"
+        time.sleep(0.01)

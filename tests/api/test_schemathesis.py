@@ -47,6 +47,7 @@ LIMITS = {"NONHOLONOMIC_MAX_T_FINAL": "100", "NONHOLONOMIC_MAX_SAMPLES": "200",
 #: JSON Schema of theirs can say it. Everywhere else a schema-valid request must be accepted.
 SEMANTIC_422 = {
     "jobs-list": "the cursor is opaque: only a page's next_cursor is one",
+    "ensembles-list": "the cursor is opaque: only a page's next_cursor is one",
     "jobs-submit": "physics across fields: the initial state on the constraint manifold, a potential's "
                    "expression and the claims' expressions must parse and be finite at the start",
     "ensembles-submit": "as jobs-submit, and members x samples and members x max_points are bounded together",
