@@ -10,7 +10,7 @@
     "#bcbd22", "#7f7f7f"];
   const POLL_MS = 80;
   let plane = null;      // {ranges, coordinate_names, units, body}
-  let orbits = [];       // {colour, points, seed, item}
+  let orbits = [];       // {colour, points, seed, item, text}
   let stars = [];        // {points, colour}
   let drawn = 0;
 
@@ -176,20 +176,52 @@
 
   const fmt = (x) => Number(x).toPrecision(5);
 
+  // The clicked orbit as a job request (POST /v1/jobs): the same system, the state the click was completed to,
+  // t_final, and the section as a poincare block; a job run from it gives these crossings with its evidence.
+  function jobOf(body, initialState) {
+    const s = body.section;
+    return { system: body.system, initial_state: initialState, t_final: body.t_final, samples: 2001,
+      poincare: { surface: s.surface, value: s.value, direction: s.direction, coordinates: s.coordinates,
+        max_points: body.max_points } };
+  }
+
+  // "copy as request": the JSON shown under the orbit's line, and a button that copies it
+  function asRequest(item, job) {
+    const details = document.createElement("details");
+    const summary = document.createElement("summary");
+    summary.textContent = "as a job request (JSON for POST /v1/jobs)";
+    const copy = document.createElement("button");
+    copy.type = "button";
+    copy.className = "copy";
+    copy.textContent = "copy";
+    const text = JSON.stringify(job, null, 1);
+    copy.addEventListener("click", () => {
+      navigator.clipboard.writeText(text).then(() => { copy.textContent = "copied"; },
+        () => { copy.textContent = "select the text to copy"; });
+    });
+    const pre = document.createElement("pre");
+    pre.className = "request";
+    pre.textContent = text;
+    details.append(summary, copy, pre);
+    item.append(details);
+  }
+
   async function orbit(u, v) {
     const colour = COLOURS[orbits.length % COLOURS.length];
     const body = { ...plane.body, point: [u, v], t_final: Number($("t_final").value),
       max_points: Number($("max_points").value) };
     const accepted = await api("/v1/explore/orbits", body);
-    const o = { colour, points: [], seed: [u, v], item: listItem(colour, "") };
+    const item = listItem(colour, "");
+    const o = { colour, points: [], seed: [u, v], item, text: item.lastChild };
     orbits.push(o);
+    asRequest(item, jobOf(body, accepted.initial_state));
     const started = performance.now();
     const poll = async () => {
       const d = await api(`/v1/explore/orbits/${accepted.id}?since=${o.points.length}`);
       o.points.push(...d.points);
       dots(d.points, colour);
       const seconds = ((performance.now() - started) / 1000).toFixed(2);
-      o.item.lastChild.textContent = ` from (${fmt(u)}, ${fmt(v)}): ${o.points.length} crossings, t = ` +
+      o.text.textContent = ` from (${fmt(u)}, ${fmt(v)}): ${o.points.length} crossings, t = ` +
         `${fmt(d.t_reached)} s${d.done ? "" : " …"} (${seconds} s)` + (accepted.branches > 1
         ? `; ${accepted.branches} states of the level cross here, the first taken` : "") +
         (d.error ? `; failed: ${d.error}` : "");

@@ -7,6 +7,7 @@ events and console errors). A screenshot of each goes to ``$NONHOLONOMIC_TEST_OU
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import time
@@ -357,6 +358,16 @@ def test_explore_page_draws_a_clicked_orbit_and_a_shift_clicked_periodic_orbit(a
     u, v = (float(c) for c in re.search(r"from \(([-\d.e]+), ([-\d.e]+)\)", second).groups())
     assert abs(u + 0.5) < 0.01 and abs(v - 1.0) < 0.04, second  # within two pixels of the click
     assert "crossings, t = 2000" in second, second
+    # "copy as request" (issue 35, item 7): the orbit's job, run through POST /v1/jobs, gives the same crossings
+    crossings = int(re.search(r"(\d+) crossings", second).group(1))
+    shown = page.locator("#orbits li").nth(1).locator("pre.request").text_content()
+    job = json.loads(shown)
+    assert job["poincare"]["surface"] == "gamma3" and job["t_final"] == 2000
+    r = httpx.post(f"{api}/v1/jobs", json=job, timeout=60)
+    assert r.status_code == 202, r.text
+    view = poll_job(httpx.Client(base_url=api, timeout=60), r.headers["location"], timeout=GUARD_S)
+    assert view["status"] == "succeeded", view["error"]
+    assert abs(view["result"]["poincare"]["count"] - crossings) <= 1, (view["result"]["poincare"]["count"], crossings)
     _click(page, -0.2, 0.0, shift=True)
     _until(page, "document.querySelectorAll('#orbits li').length >= 3")
     star = page.locator("#orbits li").nth(2).inner_text()
