@@ -251,11 +251,71 @@
     say(o.status === "degenerate" ? o.reason : `Found: ${o.stability} period-${period} orbit, T = ${fmt(o.period_t)} s.`);
   }
 
+  // Drag a box: a chaos map of it (an ensemble whose grid is the box), linked once accepted.
+  const MAP_SHAPE = [16, 16];
+  const MAP_T_FINAL = 200;
+  let drag = null;       // {x, y, x2, y2}: canvas pixels while the button is down
+  let dragged = false;   // the click that ends a drag draws no orbit
+
+  function canvasXY(event) {
+    const rect = canvas.getBoundingClientRect();  // the border is outside the drawing
+    return [(event.clientX - rect.left - canvas.clientLeft) * canvas.width / canvas.clientWidth,
+      (event.clientY - rect.top - canvas.clientTop) * canvas.height / canvas.clientHeight];
+  }
+
+  async function boxMap(d) {
+    const [ua, va] = pointAt(d.x, d.y), [ub, vb] = pointAt(d.x2, d.y2);
+    const ranges = [[Math.min(ua, ub), Math.max(ua, ub)], [Math.min(va, vb), Math.max(va, vb)]];
+    const s = plane.body.section;
+    const body = { system: plane.body.system, t_final: Math.min(Number($("t_final").value), MAP_T_FINAL),
+      indicators: ["megno"], members: { grid: { surface: s.surface, value: s.value, direction: s.direction,
+        coordinates: s.coordinates, level: s.level, shape: MAP_SHAPE, ranges } } };
+    say("Submitting a chaos map of the box …");
+    const accepted = await api("/v1/ensembles", body);
+    const item = listItem("#ffffff", ` ▦ chaos map of ${s.coordinates[0]} ${fmt(ranges[0][0])} .. ${fmt(ranges[0][1])}, ` +
+      `${s.coordinates[1]} ${fmt(ranges[1][0])} .. ${fmt(ranges[1][1])} (${MAP_SHAPE.join(" × ")} cells, ` +
+      `t = ${body.t_final} s): `);
+    const link = document.createElement("a");
+    link.href = `${accepted.location}/page`;
+    link.className = "map-link";
+    link.textContent = "its page";
+    item.append(link);
+    say("The map runs as an ensemble: its page fills in as its cells finish.");
+  }
+
+  canvas.addEventListener("mousedown", (event) => {
+    if (!plane || event.shiftKey || event.button !== 0) return;
+    const [x, y] = canvasXY(event);
+    drag = { x, y, x2: x, y2: y };
+    dragged = false;
+  });
+  canvas.addEventListener("mousemove", (event) => {
+    if (!drag) return;
+    [drag.x2, drag.y2] = canvasXY(event);
+    if (Math.abs(drag.x2 - drag.x) + Math.abs(drag.y2 - drag.y) < 8) return;
+    dragged = true;
+    redraw();
+    ctx.setLineDash([5, 3]);
+    ctx.strokeStyle = "#d62728";
+    ctx.strokeRect(drag.x, drag.y, drag.x2 - drag.x, drag.y2 - drag.y);
+    ctx.setLineDash([]);
+  });
+  window.addEventListener("mouseup", () => {
+    const d = drag;
+    drag = null;
+    if (d && dragged) {
+      redraw();
+      boxMap(d).catch((e) => say(e.message, true));
+    }
+  });
+
   canvas.addEventListener("click", (event) => {
     if (!plane) return;
-    const rect = canvas.getBoundingClientRect();  // the border is outside the drawing
-    const x = (event.clientX - rect.left - canvas.clientLeft) * canvas.width / canvas.clientWidth;
-    const y = (event.clientY - rect.top - canvas.clientTop) * canvas.height / canvas.clientHeight;
+    if (dragged) {  // the end of a drag, not a click
+      dragged = false;
+      return;
+    }
+    const [x, y] = canvasXY(event);
     const b = box();
     if (x < b.x0 || x > b.x1 || y < b.y0 || y > b.y1) return;
     const [u, v] = pointAt(x, y);

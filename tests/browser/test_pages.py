@@ -371,6 +371,25 @@ def test_explore_page_draws_a_clicked_orbit_and_a_shift_clicked_periodic_orbit(a
     _click(page, -0.2, 0.0, shift=True)
     _until(page, "document.querySelectorAll('#orbits li').length >= 3")
     star = page.locator("#orbits li").nth(2).inner_text()
+    # drag a box: a chaos map of it, submitted as an ensemble and linked (issue 35, item 7)
+    scale = page.evaluate("(c => c.clientWidth / c.width)(document.getElementById('plane'))")
+    box = page.locator("#plane").bounding_box()
+    (xa, ya), (xb, yb) = (page.evaluate(f"window.explorer.pixelOf({u}, {v})") for u, v in ((-0.6, -1.5), (-0.1, 1.5)))
+    page.mouse.move(box["x"] + xa * scale + 1, box["y"] + ya * scale + 1)
+    page.mouse.down()
+    page.mouse.move(box["x"] + (xa + xb) / 2 * scale + 1, box["y"] + (ya + yb) / 2 * scale + 1, steps=4)
+    page.mouse.move(box["x"] + xb * scale + 1, box["y"] + yb * scale + 1, steps=4)
+    page.mouse.up()
+    _until(page, "document.querySelector('#orbits a.map-link') !== null")
+    assert page.locator("#orbits li").count() == 4  # the drag drew no orbit
+    href = page.locator("#orbits a.map-link").get_attribute("href")
+    assert re.fullmatch(r"/v1/ensembles/[0-9a-f-]{36}/page", href), href
+    ensemble = httpx.get(f"{api}{href.removesuffix('/page')}", timeout=30).json()
+    grid = ensemble["request"]["members"]["grid"]
+    assert grid["shape"] == [16, 16] and grid["coordinates"] == ["gamma1", "M3"] and ensemble["members"] == 256
+    (u0, u1), (v0, v1) = grid["ranges"]
+    assert abs(u0 + 0.6) < 0.01 and abs(u1 + 0.1) < 0.01 and abs(v0 + 1.5) < 0.04 and abs(v1 - 1.5) < 0.04, grid
+    assert ensemble["request"]["indicators"] == ["megno"]
     assert "period-1 orbit (found)" in star and "elliptic" in star and "T = 5.1598 s" in star, star
     OUTPUT.mkdir(parents=True, exist_ok=True)
     (OUTPUT / "explore-latency.txt").write_text(f"100 crossings drawn {seconds:.3f} s after a click (warm)\n")
