@@ -169,11 +169,11 @@ class JobRequest(BaseModel):
         for i, claim in enumerate(self.claims):
             step([f"claims[{i}].expression"])
             try:
-                parse_claim(system, claim.expression)
+                parsed = parse_claim(system, claim.expression)
             except ExpressionError as exc:
                 found.append(FieldProblem(f"claims[{i}].expression", str(exc)))
                 continue
-            why = None if start is None else claim_initial_problem(system, *start, claim.expression)
+            why = None if start is None else claim_initial_problem(system, *start, parsed)
             if why is not None:
                 found.append(FieldProblem(f"claims[{i}].expression", why))
         return found

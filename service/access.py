@@ -37,7 +37,7 @@ from fastapi import Request
 from schemas.problems import CONFLICT, NOT_FOUND, RATE_LIMITED, UNAUTHORIZED
 from schemas.settings import Settings
 from service.errors import ProblemError
-from store.prefixes import is_prefix
+from store.listing import is_prefix
 
 if TYPE_CHECKING:
     from service.backends.base import JobBackend, JobRecord

@@ -10,6 +10,7 @@ once none of their chunks is pending (or they were cancelled).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import UTC, datetime
 from typing import Any
 
@@ -19,11 +20,25 @@ from sqlalchemy.orm import sessionmaker
 from store.expiry import Expiry
 from store.idempotency import KeyBinding, bind, unbind
 from store.jobs import UNSENT_GRACE_S
+from store.listing import ids_with_prefix, newest_first
 from store.models import EnsembleChunkRow, EnsembleRow
-from store.prefixes import ids_with_prefix
 from store.statements import autocommit, changed_one
 
 _PENDING = exists().where(EnsembleChunkRow.ensemble_id == EnsembleRow.id, EnsembleChunkRow.done.is_(False))
+#: The chunk columns an ensemble's status and progress are read from.
+_CHUNK_STATE = (EnsembleChunkRow.chunk, EnsembleChunkRow.done, EnsembleChunkRow.members_done, EnsembleChunkRow.starts)
+
+
+def _record(row: EnsembleRow, chunks: Sequence[Any], with_digests: bool) -> dict[str, Any]:
+    """An ensemble's record (:meth:`EnsembleStore.record`) from its row and its chunks' rows; without digests the
+    chunks' ``digests``, ``workers`` and ``starts`` are left empty (a list reads only status and progress)."""
+    return {"id": row.id, "created": row.created, "request": row.request, "created_at": row.created_at,
+            "chunks": [tuple(c) for c in row.chunks], "owner": row.owner, "cancelled": row.cancelled,
+            "done": {c.chunk for c in chunks if c.done},
+            "progress": {c.chunk: c.members_done for c in chunks if c.starts and not c.done},
+            "digests": {c.chunk: c.digests for c in chunks if c.done} if with_digests else {},
+            "workers": {c.chunk: c.worker for c in chunks if c.done} if with_digests else {},
+            "starts": {c.chunk: c.starts for c in chunks if c.starts} if with_digests else {}}
 
 
 class EnsembleStore:
@@ -132,47 +147,24 @@ class EnsembleStore:
             row = session.get(EnsembleRow, ensemble_id)
             if row is None:
                 return None
-            chunks = session.execute(select(EnsembleChunkRow.chunk, EnsembleChunkRow.done,
-                                            EnsembleChunkRow.members_done, EnsembleChunkRow.starts,
-                                            EnsembleChunkRow.worker, EnsembleChunkRow.digests)
+            chunks = session.execute(select(*_CHUNK_STATE, EnsembleChunkRow.worker, EnsembleChunkRow.digests)
                                      .where(EnsembleChunkRow.ensemble_id == ensemble_id)).all()
-        return {"id": ensemble_id, "request": row.request, "created_at": row.created_at,
-                "chunks": [tuple(c) for c in row.chunks],
-                "owner": row.owner, "cancelled": row.cancelled,
-                "done": {c.chunk for c in chunks if c.done},
-                "progress": {c.chunk: c.members_done for c in chunks if c.starts and not c.done},
-                "digests": {c.chunk: c.digests for c in chunks if c.done},
-                "workers": {c.chunk: c.worker for c in chunks if c.done},
-                "starts": {c.chunk: c.starts for c in chunks if c.starts}}
+        return _record(row, chunks, with_digests=True)
 
     def page(self, limit: int, after: tuple[float, str] | None,
              owner: str | None = None) -> tuple[list[dict[str, Any]], bool]:
         """Ensembles newest first by ``(created, id)``, strictly after ``after``, only those ``owner`` may see
-        if given (its own and those without an owner): each as :meth:`record` gives it, with ``id`` and
-        ``created`` (two queries for the page). Returns the page and whether more follow."""
-        query = select(EnsembleRow)
-        if after is not None:
-            score, last = after
-            query = query.where(or_(EnsembleRow.created < score,
-                                    and_(EnsembleRow.created == score, EnsembleRow.id < last)))
-        if owner is not None:
-            query = query.where(or_(EnsembleRow.owner == owner, EnsembleRow.owner.is_(None)))
-        query = query.order_by(EnsembleRow.created.desc(), EnsembleRow.id.desc()).limit(limit + 1)
+        if given (its own and those without an owner): each as :meth:`record` gives it, without the chunks'
+        digests and workers (two queries for the page). Returns the page and whether more follow."""
         with self._session() as session:
-            rows = list(session.scalars(query))
+            rows = list(session.scalars(newest_first(select(EnsembleRow), EnsembleRow, after, owner, limit)))
             more, rows = len(rows) > limit, rows[:limit]
-            chunks = session.execute(select(EnsembleChunkRow.ensemble_id, EnsembleChunkRow.chunk,
-                                            EnsembleChunkRow.done, EnsembleChunkRow.members_done,
-                                            EnsembleChunkRow.starts)
+            chunks = session.execute(select(EnsembleChunkRow.ensemble_id, *_CHUNK_STATE)
                                      .where(EnsembleChunkRow.ensemble_id.in_([r.id for r in rows]))).all()
         by_id: dict[str, list[Any]] = {}
         for c in chunks:
             by_id.setdefault(c.ensemble_id, []).append(c)
-        return [{"id": r.id, "created": r.created, "request": r.request, "created_at": r.created_at,
-                 "chunks": [tuple(c) for c in r.chunks], "owner": r.owner, "cancelled": r.cancelled,
-                 "done": {c.chunk for c in by_id.get(r.id, []) if c.done},
-                 "progress": {c.chunk: c.members_done for c in by_id.get(r.id, []) if c.starts and not c.done},
-                 "digests": {}, "workers": {}, "starts": {}} for r in rows], more
+        return [_record(r, by_id.get(r.id, []), with_digests=False) for r in rows], more
 
     def with_prefix(self, prefix: str, owner: str | None, limit: int = 6) -> list[str]:
         """Ids starting with ``prefix`` (hex digits and dashes only) that ``owner`` may see, at most ``limit``."""

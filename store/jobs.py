@@ -22,8 +22,8 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from store.expiry import Expiry
 from store.idempotency import KeyBinding, KeyBound, KeyInProgress, bind, delete_expired as delete_expired_keys, unbind
+from store.listing import ids_with_prefix, newest_first
 from store.models import JobRow
-from store.prefixes import ids_with_prefix
 from store.statements import autocommit, changed_one
 
 log = logging.getLogger(__name__)
@@ -67,6 +67,12 @@ class ActiveBoundReached(Exception):
     def __init__(self, active: int) -> None:
         super().__init__(f"{active} active jobs")
         self.active = active
+
+
+def _startable_by(worker: str) -> Any:
+    """A job ``worker`` may start: queued, or running on ``worker`` itself (its pool process died and the worker
+    took it again)."""
+    return or_(_JOBS.c.status == "queued", and_(_JOBS.c.status == "running", _JOBS.c.worker == worker))
 
 
 def quarantined_error(attempts: int) -> dict[str, str]:
@@ -264,8 +270,7 @@ class JobStore:
         pool process died and the worker took it again); False otherwise: it ended, was cancelled, or
         runs elsewhere (do not run it). With ``max_attempts``, a job started that many times already
         (its runner stopped each time before it ended) is not started but quarantined (:meth:`quarantine`)."""
-        condition = [_JOBS.c.id == job_id,
-                     or_(_JOBS.c.status == "queued", and_(_JOBS.c.status == "running", _JOBS.c.worker == worker))]
+        condition = [_JOBS.c.id == job_id, _startable_by(worker)]
         if max_attempts is not None:
             condition.append(_JOBS.c.attempts < max_attempts)
         if self._changed(update(_JOBS).where(*condition)
@@ -281,8 +286,7 @@ class JobStore:
         stopped under it); True if this call did. A job running on another worker is left alone (a message
         delivered twice). Issue 34, item 4: such a job is not run again blindly."""
         return self._changed(update(_JOBS).where(_JOBS.c.id == job_id, _JOBS.c.attempts >= max_attempts,
-                                                 or_(_JOBS.c.status == "queued",
-                                                     and_(_JOBS.c.status == "running", _JOBS.c.worker == worker)))
+                                                 _startable_by(worker))
                              .values(status="failed", worker=None, finished=_now().timestamp(),
                                      error=quarantined_error(max_attempts)))
 
@@ -394,14 +398,9 @@ class JobStore:
         what ``owner`` may see if given (its own jobs and those without an owner). Returns the page
         (without results) and whether more follow."""
         query = select(*_WITHOUT_RESULT)
-        if after is not None:
-            score, last = after
-            query = query.where(or_(JobRow.created < score, and_(JobRow.created == score, JobRow.id < last)))
         if status is not None:
             query = query.where(JobRow.status == status)
-        if owner is not None:
-            query = query.where(or_(JobRow.owner == owner, JobRow.owner.is_(None)))
-        query = query.order_by(JobRow.created.desc(), JobRow.id.desc()).limit(limit + 1)
+        query = newest_first(query, JobRow, after, owner, limit)
         with self._session() as session:
             rows = [self._stored(row, with_result=False) for row in session.execute(query)]
         return rows[:limit], len(rows) > limit

@@ -94,6 +94,12 @@ def out_format(out: str | None, allowed: Sequence[str]) -> str | None:
     return suffix
 
 
+def served(suffix: str | None) -> str | None:
+    """The service's ``format`` for a file suffix from :func:`out_format` (``nc`` is ``netcdf``; the others
+    are their own)."""
+    return "netcdf" if suffix == "nc" else suffix
+
+
 def _client(args: argparse.Namespace) -> Client:
     return Client(args.url)
 
@@ -131,8 +137,7 @@ def run(args: argparse.Namespace) -> int:
             Path(args.result).write_text(json.dumps(view["result"], indent=1) + "\n", encoding="utf-8")
             print(f"result written to {args.result}")
         if args.out:
-            path = api.trajectory(job_id, "netcdf" if fmt == "nc" else fmt,  # type: ignore[arg-type]  # a suffix allowed
-                                  out=args.out)
+            path = api.trajectory(job_id, served(fmt), out=args.out)  # type: ignore[arg-type]  # a suffix allowed
             assert isinstance(path, Path)  # with out: the file written
             print(f"trajectory written to {path}")
     return 0
@@ -161,8 +166,7 @@ def ensemble(args: argparse.Namespace) -> int:
             assert isinstance(path, Path)  # with out: the file written
             print(f"map written to {path}")
         elif args.out:
-            path = api.section(ensemble_id, "netcdf" if fmt == "nc" else fmt,  # type: ignore[arg-type]  # a suffix
-                               out=args.out)
+            path = api.section(ensemble_id, served(fmt), out=args.out)  # type: ignore[arg-type]  # a suffix allowed
             assert isinstance(path, Path)  # with out: the file written
             print(f"section written to {path}")
     summary = view.get("summary") or {}
@@ -194,7 +198,7 @@ def get(args: argparse.Namespace) -> int:
             raise UsageError(f"a {what_is} has no {what}; a job: trajectory, section, result; an ensemble: "
                              "section, map, result")
         fmt = out_format(args.out, allowed)
-        server_format = {"nc": "netcdf"}.get(fmt or "", fmt)
+        server_format = served(fmt)
         if what == "result":
             body = api.job(ident)["result"] if what_is == "job" else api.ensemble(ident)
             Path(args.out).write_text(json.dumps(body, indent=1) + "\n", encoding="utf-8")

@@ -65,10 +65,10 @@ def parse_claim(system: MechanicalSystem, text: str) -> sp.Expr:
 
 
 def claim_initial_problem(system: MechanicalSystem, parameters: np.ndarray, state: np.ndarray,
-                          text: str) -> str | None:
-    """Why a claim cannot be checked from ``state`` (the initial state): its value there is not a finite real
-    number (issue 34, item 3: refused at submission, not a job that always fails). None if it is."""
-    claim = parse_claim(system, text)
+                          claim: sp.Expr) -> str | None:
+    """Why ``claim`` (from :func:`parse_claim`) cannot be checked from ``state`` (the initial state): its value
+    there is not a finite real number (issue 34, item 3: refused at submission, not a job that always fails).
+    None if it is."""
     args = (*system.state_symbols, *system.parameter_symbols)
     with np.errstate(all="ignore"):
         value = complex(vectorize([claim], args)(np.asarray(state, dtype=float)[None, :], parameters)[0, 0])

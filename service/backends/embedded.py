@@ -223,14 +223,18 @@ class EmbeddedBackend:
     def _let_go(self, running: _Running) -> None:
         """A cancelled job still inside code that does not come back to Python (a compile): its thread
         ends when that returns (its job stops at its first progress report), and its place is taken now."""
-        running.abandoned = True  # cancelled in the store already: nothing more to record
-        self._pool.replace(running.thread, f"its job was cancelled and had not stopped {CANCEL_GRACE_S:g} s later")
+        self._give_up(running, f"its job was cancelled and had not stopped {CANCEL_GRACE_S:g} s later")
+
+    def _give_up(self, running: _Running, why: str) -> None:
+        """Nothing more of ``running`` is recorded; a new thread takes its thread's place (``JobThreads.replace``)."""
+        running.abandoned = True
+        self._pool.replace(running.thread, why)
         with self._lock:
             self._running.pop(running.job_id, None)
             self._progress.pop(running.job_id, None)
 
     def _abandon(self, running: _Running) -> None:
-        running.abandoned = True
+        running.abandoned = True  # before the record below: its own end, should it come, is not recorded
         event = self._cancel.get(running.job_id)
         if event is not None:
             event.set()  # should it ever report progress again, it stops there
@@ -239,10 +243,7 @@ class EmbeddedBackend:
                 "type": "JobTimeout", "message": abandoned_message(self._hard_limit_s)})
         except Exception:  # the store away: the restart runs the job again
             log.exception("could not record job %s failed at its hard time limit", running.job_id)
-        self._pool.replace(running.thread)
-        with self._lock:
-            self._running.pop(running.job_id, None)
-            self._progress.pop(running.job_id, None)
+        self._give_up(running, "stuck past a job's hard time limit")
 
     def _forget(self, job_id: str) -> None:
         with self._lock:

@@ -66,7 +66,7 @@ class JobThreads:
         with self._lock:
             return {"long_lane": {"size": self.long_lane, "running": len(self.promoted)}, "let_go": self.let_go}
 
-    def replace(self, thread: threading.Thread, why: str = "stuck past a job's hard time limit") -> bool:
+    def replace(self, thread: threading.Thread, why: str) -> bool:
         """Give ``thread``'s place to a new thread (``thread`` is stuck, or runs a cancelled job that has not
         come back to Python yet); True if it was one of ours."""
         with self._lock:

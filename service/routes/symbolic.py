@@ -247,11 +247,10 @@ def _hamiltonize_in_child(payload: dict[str, Any]) -> dict[str, Any]:
         return reduce(*args, **kwargs).to_json()
     except RefusedField:
         raise
-    except NUMERIC_ERRORS as exc:  # a numeric check past the float range or the memory: name the field
-        culprits = overflowing_fields({**parsed, "potential": potential}, variables, values) or [
-            (field, f"evaluating the expressions failed ({type(exc).__name__}): one of them grows too fast to be "
-                    "evaluated or checked") for field in ("L", "a1", "a2", "b")]
-        raise RefusedFields(culprits) from None
+    except NUMERIC_ERRORS as exc:  # past the float range or the memory, though none overflows at the probes above
+        why = (f"evaluating the expressions failed ({type(exc).__name__}): one of them grows too fast to be evaluated "
+               "or checked")
+        raise RefusedFields([(field, why) for field in ("L", "a1", "a2", "b")]) from None
     except ValueError as exc:
         raise RefusedField("L", str(exc)) from None
 
