@@ -106,7 +106,7 @@ class JobBackend(Protocol):
         An unknown id and another owner's job cost the same work, so a 404's timing tells nothing."""
 
     def job_ids_with_prefix(self, prefix: str, owner: str | None) -> list[str]:
-        """Ids of jobs starting with ``prefix`` that ``owner`` may see (at most 6; :mod:`store.prefixes`)."""
+        """Ids of jobs starting with ``prefix`` that ``owner`` may see (at most 6; :mod:`store.listing`)."""
 
     def cancel(self, job_id: str) -> JobRecord | None:
         """Ask the job to stop; returns it (None if unknown)."""
