@@ -6,4 +6,5 @@
 - :mod:`.integration`: one orbit with heyoka's Taylor integrator (compiled once per process) or scipy's
   DOP853 (the cross-check engine).
 - :mod:`.integration_batch`: many members at once in heyoka's batch mode (SIMD lanes).
+- :mod:`.precision`: mpmath's working precision kept per thread (threads of one process do not interfere).
 """
