@@ -145,7 +145,7 @@ def _section_attrs(section: Mapping[str, Any]) -> dict[str, Any]:
             "section": json.dumps(facts)}
 
 
-def _write(variables: dict[str, Any], coords: dict[str, Any], attrs: dict[str, Any]) -> bytes:
+def write_netcdf(variables: dict[str, Any], coords: dict[str, Any], attrs: dict[str, Any]) -> bytes:
     """The NetCDF-4 file of the variables (no fill values: the numbers as they are)."""
     import xarray
 
@@ -166,8 +166,9 @@ def trajectory_netcdf(job_id: str, created_at: str, result: Mapping[str, Any], r
     vectors = {k: v for k, v in trajectory.items() if k not in ("t", "tau")}
     attrs = _job_attrs(f"{result['system'].get('title', '')}: trajectory of job {job_id}", job_id, created_at,
                        result, request, f"GET /v1/jobs/{job_id}/trajectory?format=netcdf")
-    return _write(_variables(vectors, len(trajectory["t"]), "t", units, labels, result_components(result, request)),
-                  _times(trajectory, "t", units, labels), attrs)
+    names = result_components(result, request)
+    return write_netcdf(_variables(vectors, len(trajectory["t"]), "t", units, labels, names),
+                        _times(trajectory, "t", units, labels), attrs)
 
 
 def section_netcdf(job_id: str, created_at: str, result: Mapping[str, Any], request: Mapping[str, Any]) -> bytes:
@@ -178,8 +179,8 @@ def section_netcdf(job_id: str, created_at: str, result: Mapping[str, Any], requ
     attrs = _job_attrs(f"{result['system'].get('title', '')}: Poincare section of job {job_id}", job_id, created_at,
                        result, request, f"GET /v1/jobs/{job_id}/section?format=netcdf")
     names = result_components(result, request)
-    return _write(_variables(section["points"], len(section["t"]), "crossing", units, labels, names),
-                  _times(section, "crossing", units, labels), {**attrs, **_section_attrs(section)})
+    return write_netcdf(_variables(section["points"], len(section["t"]), "crossing", units, labels, names),
+                        _times(section, "crossing", units, labels), {**attrs, **_section_attrs(section)})
 
 
 def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary: Mapping[str, Any] | None,
@@ -226,4 +227,4 @@ def ensemble_section_netcdf(ensemble_id: str, record: Mapping[str, Any], summary
         "members_with_crossings": np.int64(sum(1 for m in parts["member"] if len(m))),
         **({} if first is None else {k: v for k, v in _section_attrs(first).items() if k != "section"}),
     }
-    return _write(_variables(vectors, count, "crossing", units, labels, names), coords, attrs)
+    return write_netcdf(_variables(vectors, count, "crossing", units, labels, names), coords, attrs)

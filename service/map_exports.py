@@ -15,7 +15,7 @@ import numpy as np
 
 from schemas.chaos_maps import INDICATOR_WORDS, STATUS_CODES, MapArrays, map_arrays
 from service.ensembles import request_units
-from service.exports_netcdf import CONVENTIONS, REFERENCES, _write
+from service.exports_netcdf import CONVENTIONS, REFERENCES, write_netcdf
 
 _WORDS = {code: word for word, code in STATUS_CODES.items()}
 
@@ -109,4 +109,4 @@ def map_netcdf(ensemble_id: str, record: Mapping[str, Any], members: Iterable[Ma
         "references": REFERENCES, "ensemble_id": ensemble_id, "request": json.dumps(request),
         "summary": json.dumps((summary or {}).get("map")), "t_final": float(request["t_final"]),
     }
-    return _write(variables, coords, attrs)
+    return write_netcdf(variables, coords, attrs)

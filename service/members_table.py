@@ -1,4 +1,5 @@
-"""An ensemble's members as one table (``GET /v1/ensembles/{id}/members?format=csv``), with what sets each apart.
+"""An ensemble's members as one table (``GET /v1/ensembles/{id}/members?format=csv`` or ``format=netcdf``), with what
+sets each apart.
 
 One row per member done, in index order: ``member``, ``status``; a sweep's value in a column named after its
 parameter (``D [1]``), a chaos map cell's ``cell_i``, ``cell_j``, its two coordinates and ``branches``; then
@@ -11,9 +12,12 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from typing import Any
+
+import numpy as np
 
 #: A parameter path's group: ``inertia`` of ``inertia[1]``, ``potential`` of ``potential.a[2]``.
 _GROUP = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -92,3 +96,61 @@ def members_csv(members: Iterable[Mapping[str, Any]], names: Mapping[str, Sequen
     for row in rows:
         writer.writerow([_cell(row.get(column)) for column in header])
     yield buffer.getvalue()
+
+
+def _header_parts(header: str) -> tuple[str, str | None]:
+    """``("D", "1")`` of ``"D [1]"``; ``("status", None)`` of ``"status"``."""
+    name, _, unit = header.partition(" [")
+    return name, unit[:-1] if unit.endswith("]") else None
+
+
+def _variable_name(name: str) -> str:
+    """A NetCDF variable's name for a column: a sweep's path ``inertia[1]`` becomes ``inertia_1``."""
+    return re.sub(r"[^A-Za-z0-9_]+", "_", name).strip("_") or "column"
+
+
+def members_netcdf(ensemble_id: str, record: Mapping[str, Any], members: Iterable[Mapping[str, Any]],
+                   names: Mapping[str, Sequence[str]], units: Mapping[str, str]) -> bytes:
+    """The members table (:func:`members_csv`'s columns) as NetCDF-4: dimension ``member`` (the coordinate, the
+    member's index), one variable per column with its ``units`` and, as ``long_name``, the column's header; numbers
+    as float64 (NaN where a member has none: a failed member's drift), ``checks_passed`` as int8 (1, 0, -1 for
+    none: CF flags), ``status`` and ``error`` as strings. Global attributes: the conventions, the ensemble, its
+    request as JSON, the paper."""
+    import netCDF4
+    import xarray
+
+    from service.exports_netcdf import CONVENTIONS, REFERENCES, write_netcdf
+
+    rows = [dict(member_row(m, names, units)) for m in sorted(members, key=lambda m: m["index"])]
+    header: dict[str, None] = {}
+    for row in rows:
+        header.update(dict.fromkeys(row))
+    index = np.array([row["member"] for row in rows], dtype=np.int64)
+    variables: dict[str, Any] = {}
+    for column in header:
+        if column == "member":
+            continue
+        name, unit = _header_parts(column)
+        values = [row.get(column) for row in rows]
+        meta: dict[str, Any] = {"long_name": column, **({"units": unit} if unit else {})}
+        if name == "checks_passed":
+            data = np.array([-1 if v is None else int(bool(v)) for v in values], dtype=np.int8)
+            meta.update(flag_values=np.array([-1, 0, 1], np.int8), flag_meanings="not_checked failed passed")
+        elif all(v is None or isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+            data = np.array([np.nan if v is None else float(v) for v in values], dtype=np.float64)
+        else:
+            data = np.array(["" if v is None else str(v) for v in values], dtype=object)
+        variables[_variable_name(name)] = ("member", data, meta)
+    coords = {"member": ("member", index, {"long_name": "ensemble member index"})}
+    request = record["request"]
+    attrs = {
+        "Conventions": CONVENTIONS,
+        "title": f"{request['system'].get('kind', '')}: the members of ensemble {ensemble_id}, one row each",
+        "institution": "nonholonomic: a computation service for nonholonomic mechanics",
+        "source": "nonholonomic (every member integrated by heyoka, see the members' integration blocks)",
+        "history": f"{record.get('created_at', '')}: ensemble {ensemble_id} submitted; exported by GET /v1/ensembles/"
+                   f"{ensemble_id}/members?format=netcdf (xarray {xarray.__version__}, netCDF4 {netCDF4.__version__})",
+        "references": REFERENCES, "ensemble_id": ensemble_id, "system_kind": request["system"].get("kind", ""),
+        "request": json.dumps(request),
+    }
+    return write_netcdf(variables, coords, attrs)

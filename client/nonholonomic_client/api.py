@@ -367,7 +367,8 @@ class Client(SymbolicRoutes):
         return self._wait("ensemble", self.ensemble, ensemble_id, timeout, poll, progress or None)
 
     def members(self, ensemble_id: str, offset: int = 0, limit: int | None = None,
-                format: Literal["json", "pandas"] = "json") -> dict[str, Any] | pandas.DataFrame:  # noqa: A002
+                format: Literal["json", "pandas", "csv", "netcdf"] = "json",  # noqa: A002
+                out: str | Path | None = None) -> dict[str, Any] | pandas.DataFrame | bytes | Path:
         """``GET /v1/ensembles/{id}/members``: a page of member results, or every member as a table.
 
         Parameters
@@ -377,17 +378,25 @@ class Client(SymbolicRoutes):
         limit : int, optional
             Members at most: for ``"json"`` one page (default 100, at most 1000); for ``"pandas"``
             default every member from ``offset`` on (fetched a page of 1000 at a time).
-        format : {"json", "pandas"}, default "json"
+        format : {"json", "pandas", "csv", "netcdf"}, default "json"
             ``"pandas"``: a DataFrame indexed by ``member`` (see
-            :func:`nonholonomic_client.frames.members_frame` for its columns).
+            :func:`nonholonomic_client.frames.members_frame` for its columns). ``"csv"``, ``"netcdf"``: the
+            server's table of every member done (the same columns; NetCDF: dimension ``member``, a variable per
+            column with its units), as bytes or streamed into ``out``; ``offset`` and ``limit`` do not apply.
+        out : str or Path, optional
+            Where to write a ``csv`` or ``netcdf`` table.
 
         Returns
         -------
-        dict or pandas.DataFrame
+        dict, pandas.DataFrame, bytes or Path
             ``{offset, limit, total, members: [{index, status, initial_state, final_state, ...}]}``
-            for ``"json"``.
+            for ``"json"``; ``out`` when given.
         """
         path = f"/v1/ensembles/{ensemble_id}/members"
+        if format in ("csv", "netcdf"):
+            if out is not None:
+                return self._download(path, {"format": format}, out)
+            return self._request("GET", path, params={"format": format}).content
         if format == "json":
             return self._json("GET", path, params={"offset": offset, "limit": 100 if limit is None else limit})
         names: dict[str, list[str]] = {}

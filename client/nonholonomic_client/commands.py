@@ -176,12 +176,13 @@ def ensemble(args: argparse.Namespace) -> int:
 #: What ``get`` writes, by what is asked for: the suffixes each takes.
 GET_FORMATS = {("job", "trajectory"): ("csv", "npz", "nc", "json"), ("job", "section"): ("csv", "npz", "nc", "json"),
                ("job", "result"): ("json",), ("ensemble", "section"): ("csv", "npz", "nc"),
-               ("ensemble", "map"): ("csv", "nc", "json"), ("ensemble", "result"): ("json",)}
+               ("ensemble", "map"): ("csv", "nc", "json"), ("ensemble", "members"): ("csv", "nc"),
+               ("ensemble", "result"): ("json",)}
 
 
 def get(args: argparse.Namespace) -> int:
     """``nonholonomic get ID --out FILE [--what W]``: an existing job's trajectory, section or result, or an
-    ensemble's section, map or view, in the format the suffix names (issue 35, item 3)."""
+    ensemble's section, map, members table or view, in the format the suffix names (issue 35, items 2 and 3)."""
     with _client(args) as api:
         try:
             view: dict[str, Any] = api.job(args.ident, trajectory=False)
@@ -196,7 +197,7 @@ def get(args: argparse.Namespace) -> int:
         allowed = GET_FORMATS.get((what_is, what))
         if allowed is None:
             raise UsageError(f"a {what_is} has no {what}; a job: trajectory, section, result; an ensemble: "
-                             "section, map, result")
+                             "section, map, members, result")
         fmt = out_format(args.out, allowed)
         server_format = served(fmt)
         if what == "result":
@@ -206,6 +207,8 @@ def get(args: argparse.Namespace) -> int:
             api.trajectory(ident, server_format, out=args.out)  # type: ignore[arg-type]  # a suffix allowed
         elif what == "section":
             api.section(ident, server_format, out=args.out, of=what_is)  # type: ignore[arg-type]  # a suffix allowed
+        elif what == "members":
+            api.members(ident, format=server_format, out=args.out)  # type: ignore[arg-type]  # a suffix allowed
         else:
             api.chaos_map(ident, server_format, out=args.out)  # type: ignore[arg-type]  # a suffix allowed
     print(f"{what_is} {ident}: {what} written to {args.out}")

@@ -41,7 +41,7 @@ from service.errors import (
 )
 from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses, vector_components
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
-from service.members_table import members_csv
+from service.members_table import members_csv, members_netcdf
 from service.openapi import operation_id
 from service.validation import POOL_FULL, validated
 from store.idempotency import KeyBinding
@@ -117,18 +117,21 @@ def get_ensemble(ensemble_id: str, backend: Backend, owner: Owner) -> JSONRespon
 
 @router.get("/{ensemble_id}/members", operation_id="ensembles-members", response_model=MembersPage,
             responses={**_ERRORS,  # JSON (the model) first: a generated client reads pages; CSV with format=csv
-                       200: {"description": "a page of members (JSON), or every member done as one table (format=csv)",
-                             "content": {MEDIA_TYPES["csv"]: {"schema": {"type": "string"}}}},
+                       200: {"description": "a page of members (JSON), or every member done as one table (format=csv "
+                                            "or netcdf)",
+                             "content": {MEDIA_TYPES["csv"]: {"schema": {"type": "string"}},
+                                         MEDIA_TYPES["netcdf"]: {"schema": {"type": "string", "format": "binary"}}}},
                        **problem_responses({422: f"offset < 0, limit outside 1 .. {MAX_PAGE}, or an unknown format"})},
-            summary="A page of member results (JSON), or every member as a CSV table")
+            summary="A page of member results (JSON), or every member as a table (CSV or NetCDF)")
 def get_members(ensemble_id: str, request: Request, backend: Backend, owner: Owner, offset: int = Query(0, ge=0),
                 limit: int = Query(100, ge=1, le=MAX_PAGE),
-                format: Literal["json", "csv"] = Query(  # noqa: A002
+                format: Literal["json", "csv", "netcdf"] = Query(  # noqa: A002
                     "json", description="json: members offset .. offset + limit - 1; csv: every member done, one row "
                                         "each, with what sets it apart (a sweep's value named after its parameter, a "
-                                        "map cell's indices and coordinates)")) -> Response:
+                                        "map cell's indices and coordinates); netcdf: the same table, dimension "
+                                        "member, each column a variable with its units")) -> Response:
     """Members ``offset .. offset + limit - 1`` that are done, each with its index, label, status and
-    the same result fields as a job; or (``format=csv``) every member done as one table
+    the same result fields as a job; or (``format=csv``, ``format=netcdf``) every member done as one table
     (:mod:`service.members_table`)."""
     record = ensemble_of(backend, owner, ensemble_id)
     ensemble_id = record["id"]  # the whole id, also when the path gave its first characters
@@ -137,6 +140,10 @@ def get_members(ensemble_id: str, request: Request, backend: Backend, owner: Own
         rows = members_csv(all_members(backend.ensembles, ensemble_id, record), components,
                            request_units(record["request"]))
         return download(request, rows, MEDIA_TYPES["csv"], f"ensemble-{ensemble_id}-members.csv")
+    if format == "netcdf":
+        data = members_netcdf(ensemble_id, record, all_members(backend.ensembles, ensemble_id, record), components,
+                              request_units(record["request"]))
+        return download(request, data, MEDIA_TYPES["netcdf"], f"ensemble-{ensemble_id}-members.nc")
     page = members_page(backend.ensembles, ensemble_id, record, offset, limit)
     total = sum(stop - start for start, stop in record["chunks"])
     return JSONResponse({"offset": offset, "limit": limit, "total": total, "components": components, "members": page})

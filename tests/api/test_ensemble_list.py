@@ -5,6 +5,10 @@ share is a 409 naming them, and another key's ensemble is neither listed nor fou
 
 from __future__ import annotations
 
+import json
+import tempfile
+from pathlib import Path
+
 from tests.api.conftest import BALL, STATE
 from tests.api.test_admission import A, B, _finished, _until_status, app_with, ensemble
 
@@ -86,6 +90,23 @@ def test_the_members_csv_carries_the_swept_value_and_the_jsons_numbers(app_with)
         assert float(row["final_M1 [kg m^2/s]"]) == member["final_state"]["M"][0]  # repr: read back exactly
         assert float(row["drift_energy"]) == member["integrals"][0]["max_rel_drift"]
     assert list(rows[0])[:3] == ["member", "status", swept] and rows[0]["status"] == "succeeded"
+    # the same table as NetCDF (dimension member): each column a variable with its units, the numbers bit for bit
+    import xarray
+
+    nc = client.get(f"{r.headers['location']}/members", params={"format": "netcdf"})
+    assert nc.status_code == 200 and nc.headers["content-type"] == "application/x-netcdf", nc.text[:300]
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "members.nc"
+        path.write_bytes(nc.content)
+        dataset = xarray.load_dataset(path)
+    assert list(dataset["member"].values) == [0, 1] and list(dataset["D"].values) == [0.1, 0.2]
+    assert dataset["D"].attrs["long_name"] == swept and dataset["final_M1"].attrs["units"] == "kg m^2/s"
+    for k, member in enumerate(members):
+        assert float(dataset["final_M1"].values[k]) == member["final_state"]["M"][0]
+        assert float(dataset["drift_energy"].values[k]) == member["integrals"][0]["max_rel_drift"]
+        assert str(dataset["status"].values[k]) == "succeeded"
+        assert int(dataset["checks_passed"].values[k]) == {"": -1, "False": 0, "True": 1}[rows[k]["checks_passed"]]
+    assert json.loads(dataset.attrs["request"])["members"]["sweep"]["parameter"] == "D"
 
 
 def _finished_any(client, location: str) -> None:

@@ -323,3 +323,13 @@ def test_cli_get_saves_an_existing_jobs_and_ensembles_results(base, api, ball_jo
     assert rows[0][0] == "member" and len(rows) > 1
     wrong = _cli(base, "get", ensemble_id, "--out", "x.json", cwd=tmp_path)
     assert wrong.returncode == 2 and ".csv, .npz, .nc" in wrong.stderr, wrong.stderr
+    # the members table (issue 35, item 2): CSV with the same numbers as the client's JSON, and NetCDF
+    done = _cli(base, "get", ensemble_id[:8], "--what", "members", "--out", "members.csv", cwd=tmp_path)
+    assert done.returncode == 0 and "members written to members.csv" in done.stdout, done.stderr
+    table = list(csv.DictReader(io.StringIO((tmp_path / "members.csv").read_text())))
+    members = api.members(ensemble_id)["members"]
+    assert [int(r["member"]) for r in table] == [m["index"] for m in members]
+    column = next(c for c in table[0] if c.startswith("final_M1"))
+    assert [float(r[column]) for r in table] == [m["final_state"]["M"][0] for m in members]
+    done = _cli(base, "get", ensemble_id, "--what", "members", "--out", "members.nc", cwd=tmp_path)
+    assert done.returncode == 0 and (tmp_path / "members.nc").read_bytes()[:4] == b"\x89HDF", done.stderr
