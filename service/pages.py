@@ -22,7 +22,8 @@ REFRESH_S = 2
 #: Plots on a job's page: (name, caption); shown when the result has what they need.
 JOB_PLOT_CAPTIONS = {
     "trajectory": "the orbit on its sphere or ellipsoid, and the momentum against t (drawn from the integrator's "
-                  "dense output through the stored samples)",
+                  "dense output through the stored samples); a long run as a window over the whole run in grey: "
+                  "by default its last 4 turns",
     "integrals": "relative drift |I(t) − I(0)| / max(|I(0)|, scale) of every first integral at the samples",
     "poincare": "the Poincaré section: the two coordinates asked for at each crossing",
     "lyapunov": "running finite-time estimates of the Lyapunov exponents (QR every interval); the title says "
@@ -141,15 +142,18 @@ def ensemble_plots(view: dict[str, Any]) -> list[tuple[str, str, str | None]]:
     return [(name, caption, pending) for name, caption in ENSEMBLE_PLOT_CAPTIONS.items() if wanted[name]]
 
 
-def render_job(job: dict[str, Any]) -> str:
+def render_job(job: dict[str, Any], window: tuple[float, float] | None = None) -> str:
     """``GET /v1/jobs/{id}/page``: the system, the evidence tables with verdicts, the plots, the exports.
 
-    ``job`` is the job view (``GET /v1/jobs/{id}``) of a simulation job.
+    ``job`` is the job view (``GET /v1/jobs/{id}``) of a simulation job; ``window`` the trajectory plot's
+    ``(t_from, t_to)`` (None: its default, the last stretch of a long run).
     """
     result = job.get("result")
+    query = "" if window is None else f"?t_from={window[0]!r}&t_to={window[1]!r}"
     return environment().get_template("job.html").render(
         job=job, result=result, system=(result or {}).get("system"), written=written_system(job.get("request")),
-        plots=job_plots(result, job["status"]), refresh=_refresh(job["status"]))
+        plots=job_plots(result, job["status"]), refresh=_refresh(job["status"]), window=window,
+        window_query=query)
 
 
 def written_system(request: Any) -> dict[str, Any] | None:

@@ -33,7 +33,7 @@ import threading
 import time
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -141,25 +141,29 @@ def _key(result: Mapping[str, Any], request: Mapping[str, Any], names: Sequence[
     return digest.hexdigest()
 
 
-def dense_orbit(result: Mapping[str, Any], request: Mapping[str, Any], names: Sequence[str]) -> Orbit:
+def dense_orbit(result: Mapping[str, Any], request: Mapping[str, Any], names: Sequence[str],
+                window: tuple[float, float] | None = None) -> Orbit:
     """The orbit of a job's result for its trajectory plot, densely sampled (see the module's doc).
 
     Parameters
     ----------
     result, request : the job's ``result`` (with its ``trajectory``) and ``request``.
     names : the state vectors the plot draws, the curve first (``["gamma", "M"]``).
+    window : ``(t_from, t_to)``: only that stretch, as densely as the whole run would be (the integration
+        still starts at t = 0; only the stored sample intervals the window meets are cut finer).
 
     Returns
     -------
     Orbit
-        The dense orbit, or the stored samples with the reason when it cannot be had.
+        The dense orbit (of the window), or the stored samples (in the window) with the reason when it cannot
+        be had.
     """
-    key = _key(result, request, names)
+    key = _key(result, request, names) + ("" if window is None else f"|{window[0]!r},{window[1]!r}")
     with _cache_lock:
         if key in _cache:
             _cache.move_to_end(key)
             return _cache[key]
-    orbit = _compute(result, request, names)
+    orbit = _compute(result, request, names, window)
     if orbit.dense:  # the stored samples are cheap to draw again, and a budget's fallback must not stay
         with _cache_lock:
             _cache[key] = orbit
@@ -168,35 +172,65 @@ def dense_orbit(result: Mapping[str, Any], request: Mapping[str, Any], names: Se
     return orbit
 
 
-def _compute(result: Mapping[str, Any], request: Mapping[str, Any], names: Sequence[str]) -> Orbit:
+def window_of(orbit: Orbit, window: tuple[float, float]) -> Orbit:
+    """The part of ``orbit`` with ``t_from <= t <= t_to`` (the stored samples' fallback cut to the window)."""
+    keep = (orbit.t >= window[0]) & (orbit.t <= window[1])
+    return replace(orbit, t=orbit.t[keep], vectors={n: v[keep] for n, v in orbit.vectors.items()})
+
+
+def _compute(result: Mapping[str, Any], request: Mapping[str, Any], names: Sequence[str],
+             window: tuple[float, float] | None = None) -> Orbit:
     stored_t = np.asarray(result["trajectory"]["t"], dtype=float)
-    intervals = max(len(stored_t) - 1, 1)
+    if window is None:
+        cut = np.ones(max(len(stored_t) - 1, 1), dtype=bool)  # which stored intervals are cut finer
+    else:
+        cut = (stored_t[1:] > window[0]) & (stored_t[:-1] < window[1])
+        if window[0] == window[1] or not cut.any():
+            cut = (stored_t[1:] >= window[0]) & (stored_t[:-1] <= window[1])
+        cut = cut[:int(np.nonzero(cut)[0].max()) + 1] if cut.any() else cut[:1]  # the grid ends with the window
+
+    def fallback(why: str | None = None, cut_short: bool = False) -> Orbit:
+        orbit = stored_orbit(result, names, why, cut_short)
+        return orbit if window is None else window_of(orbit, window)
+
+    intervals = int(cut.sum())
+    if len(stored_t) < 2 or intervals == 0:
+        return fallback()
     most = (MAX_POINTS - 1) // intervals  # the most points per stored interval
     if most < 2:
-        return stored_orbit(result, names)  # already as dense as a plot draws
+        return fallback()  # already as dense as a plot draws
     try:
         rerun = _Rerun(result, request, names)
     except Exception as exc:  # noqa: BLE001  (any reason: the plot still draws the samples)
-        return stored_orbit(result, names, f"no dense output: {_reason(exc)}")
+        return fallback(f"no dense output: {_reason(exc)}")
     start = time.perf_counter()
+
+    def states(per: int) -> tuple[np.ndarray, dict[str, np.ndarray], float]:
+        t, vectors, deviation = rerun.states(np.where(cut, per, 1), start)
+        if window is not None:
+            keep = (t >= window[0]) & (t <= window[1])
+            t, vectors = t[keep], {n: v[keep] for n, v in vectors.items()}
+        return t, vectors, deviation
+
     try:
         per = min(most, max(2, math.ceil((START_POINTS - 1) / intervals)))
-        t, vectors, deviation = rerun.states(per, start)
+        t, vectors, deviation = states(per)
         worst = drawn_sagitta(t, vectors, names)
         for _ in range(REFINEMENTS):
             if worst <= SAGITTA_TARGET or per >= most or time.perf_counter() - start > TIME_BUDGET_S / 2:
                 break
             per = min(most, math.ceil(per * math.sqrt(worst / SAGITTA_TARGET) * 1.1))  # sagitta ~ 1/N²
-            t, vectors, deviation = rerun.states(per, start)
+            t, vectors, deviation = states(per)
             worst = drawn_sagitta(t, vectors, names)
     except _Slow:
-        return stored_orbit(result, names, f"the dense output took more than {TIME_BUDGET_S:g} s", cut_short=True)
+        return fallback(f"the dense output took more than {TIME_BUDGET_S:g} s", cut_short=True)
     except Exception as exc:  # noqa: BLE001
-        return stored_orbit(result, names, f"no dense output: {_reason(exc)}")
+        return fallback(f"no dense output: {_reason(exc)}")
     if not deviation <= MATCH_TOLERANCE:
-        return stored_orbit(result, names, f"the integration again is {deviation:.1e} off the stored samples")
+        return fallback(f"the integration again is {deviation:.1e} off the stored samples")
     capped = f" (capped at {MAX_POINTS})" if worst > SAGITTA_TARGET and per >= most else ""
-    note = f"dense output at {len(t)} times{capped}, through the {len(stored_t)} stored samples"
+    inside = int(np.count_nonzero((stored_t >= t[0]) & (stored_t <= t[-1]))) if len(t) else 0
+    note = f"dense output at {len(t)} times{capped}, through the {inside} stored samples"
     return Orbit(t, vectors, True, worst, note, deviation)
 
 
@@ -225,29 +259,32 @@ class _Rerun:
         self.slices = {n: vector_slice(self.system, n) for n in names}
         self.stored = {n: np.asarray(trajectory[n], dtype=float).reshape(len(self.stored_t), -1) for n in names}
 
-    def states(self, per: int, start: float) -> tuple[np.ndarray, dict[str, np.ndarray], float]:
-        """The orbit with every stored sample interval cut into ``per`` equal parts (the stored times
-        among the grid's, exactly), and the largest relative distance from the stored samples. The
-        integration stops (:class:`_Slow`) when it runs past :data:`TIME_BUDGET_S` from ``start``
-        (checked between its segments: a short run, under ``FIRST_SEGMENT_STEPS`` steps, is one segment
-        and always ends)."""
+    def states(self, per: np.ndarray, start: float) -> tuple[np.ndarray, dict[str, np.ndarray], float]:
+        """The orbit with stored sample interval ``i`` cut into ``per[i]`` equal parts (the stored times among
+        the grid's, exactly; the grid ends at the last interval ``per`` names), and the largest relative
+        distance from the stored samples. The integration stops (:class:`_Slow`) when it runs past
+        :data:`TIME_BUDGET_S` from ``start`` (checked between its segments: a short run, under
+        ``FIRST_SEGMENT_STEPS`` steps, is one segment and always ends)."""
         from nonholonomic.numerics.integration import integrate
 
-        t = self.stored_t
-        grid = np.append((t[:-1, None] + np.diff(t)[:, None] * (np.arange(per) / per)).ravel(), t[-1])
+        m = len(per)
+        t = self.stored_t[:m + 1]
+        grid = np.append(np.concatenate([t[i] + (t[i + 1] - t[i]) * (np.arange(k) / k) for i, k in enumerate(per)]),
+                         t[-1])
 
         def in_time(_: float) -> bool:
             if time.perf_counter() - start > TIME_BUDGET_S:
                 raise _Slow
             return True
 
-        trajectory = integrate(self.system, self.p, self.y0, self.t_final, len(grid), engine=self.engine,
+        trajectory = integrate(self.system, self.p, self.y0, float(t[-1]), len(grid), engine=self.engine,
                                tolerance=self.tolerance, progress=in_time, times=grid)
         vectors = {n: trajectory.states[:, s] for n, s in self.slices.items()}
-        at = np.arange(len(t)) * per
+        at = np.concatenate([[0], np.cumsum(per)])
         deviation = 0.0
         for name, values in vectors.items():
+            stored = self.stored[name][:m + 1]
             extent = max(float(np.max(np.abs(self.stored[name]))), float(np.max(np.ptp(self.stored[name], axis=0))))
             extent = extent if extent > 0 else 1.0
-            deviation = max(deviation, float(np.max(np.abs(values[at] - self.stored[name]))) / extent)
+            deviation = max(deviation, float(np.max(np.abs(values[at] - stored))) / extent)
         return grid, vectors, deviation

@@ -41,7 +41,6 @@ import numpy as np
 import sympy as sp
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
 
 from nonholonomic.definition import MechanicalSystem, StateConstraint, StateVector
 from nonholonomic.potentials import EXPRESSION
@@ -89,7 +88,7 @@ class PlotUnavailable(ValueError):
 # --------------------------------------------------------------------------- public API
 
 
-def job_plot(name: str, result: dict, request: dict, fmt: str) -> bytes:
+def job_plot(name: str, result: dict, request: dict, fmt: str, window: tuple[float, float] | None = None) -> bytes:
     """One plot of a job's result, rendered.
 
     Parameters
@@ -102,6 +101,8 @@ def job_plot(name: str, result: dict, request: dict, fmt: str) -> bytes:
     result : the job's ``result`` (``GET /v1/jobs/{id}``).
     request : the job's ``request`` (the integrals plot rebuilds the system and its parameters from it).
     fmt : ``png`` or ``svg`` (:data:`FORMATS`).
+    window : ``(t_from, t_to)``, the trajectory plot's window (:mod:`service.plot_trajectory`; None: the last
+        stretch of a long run, a short run whole).
 
     Returns
     -------
@@ -118,10 +119,13 @@ def job_plot(name: str, result: dict, request: dict, fmt: str) -> bytes:
     _check(name, JOB_PLOTS, fmt)
     if not isinstance(result, Mapping) or "trajectory" not in result:
         raise PlotUnavailable("this job has no simulation result to plot (a paper report, or no result yet)")
-    from service.plot_periodic import periodic_orbit_figure  # its own module, which imports this one
+    from service.plot_periodic import periodic_orbit_figure  # their own modules, which import this one
+    from service.plot_trajectory import trajectory_figure
 
+    figures = {**_JOB_FIGURES, "periodic_orbit": periodic_orbit_figure,
+               "trajectory": lambda r, q: trajectory_figure(r, q, window)}
     with _LOCK, matplotlib.rc_context(_STYLE):
-        fig = {**_JOB_FIGURES, "periodic_orbit": periodic_orbit_figure}[name](result, request)
+        fig = figures[name](result, request)
         transient = getattr(fig, "nonholonomic_transient", False)
         data = _render(fig, fmt)
     if transient:
@@ -321,82 +325,6 @@ def _vector_samples(trajectory: Mapping[str, Any], name: str) -> np.ndarray:
 # --------------------------------------------------------------------------- job plots
 
 
-def _plane_orbit(ax: Any, g: np.ndarray, keep: np.ndarray, t: np.ndarray, geometric: StateVector,
-                 units: Mapping[str, str]) -> None:
-    """The orbit of a 2-component state vector (q1, q2) in its plane."""
-    ax.plot(g[keep, 0], g[keep, 1], color="C0", linewidth=0.7, in_layout=False)
-    ax.plot(*g[0], marker="o", color="C2", markersize=4, linestyle="none", label="t = 0")
-    ax.plot(*g[-1], marker="s", color="C3", markersize=4, linestyle="none", label=f"t = {t[-1]:g} s")
-    names = [str(s) for s in geometric.symbols]
-    ax.set_xlabel(f"{names[0]} [{units.get(geometric.name, '')}]")
-    ax.set_ylabel(f"{names[1]} [{units.get(geometric.name, '')}]")
-    ax.set_title(f"{_symbol(geometric.name)} = ({names[0]}, {names[1]})\n{geometric.meaning}")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper left")
-
-
-def _space_orbit(ax3: Any, g: np.ndarray, keep: np.ndarray, t: np.ndarray, geometric: StateVector,
-                 constraint: StateConstraint | None, info: Mapping[str, Any], units: Mapping[str, str]) -> None:
-    """The orbit of a 3-vector in space, on its sphere or ellipsoid when it has one."""
-    mesh = _surface_mesh(constraint, info.get("parameters", {}))
-    if mesh is not None:
-        ax3.plot_wireframe(*mesh, color="0.55", linewidth=0.3, alpha=0.35, in_layout=False)
-        extent = np.array([np.ptp(m) for m in mesh])
-        ax3.set_box_aspect(tuple(extent / extent.max()))
-    ax3.plot(g[keep, 0], g[keep, 1], g[keep, 2], color="C0", linewidth=0.7, in_layout=False)
-    ax3.plot(*g[0], marker="o", color="C2", markersize=4, linestyle="none", label="t = 0")
-    ax3.plot(*g[-1], marker="s", color="C3", markersize=4, linestyle="none", label=f"t = {t[-1]:g} s")
-    for k, (axis, set_label) in enumerate(zip((ax3.xaxis, ax3.yaxis, ax3.zaxis),
-                                               (ax3.set_xlabel, ax3.set_ylabel, ax3.set_zlabel))):
-        axis.set_major_locator(MaxNLocator(5))
-        set_label(_component_label(geometric, k, units))
-    ax3.tick_params(labelsize=7)
-    where = (f" on {constraint.formula.split(':')[0]} (eq. {constraint.equation})" if constraint else "")
-    ax3.set_title(f"{_symbol(geometric.name)}{where}\n{geometric.meaning}")
-    ax3.legend(loc="upper left")
-
-
-def _trajectory_figure(result: Mapping[str, Any], request: Mapping[str, Any] | None = None) -> Figure:
-    """The geometric vector on its sphere or ellipsoid (3-D) and the momentum-like vector against t, drawn
-    through the integrator's dense output (:func:`service.plot_orbit.dense_orbit`), not the job's samples."""
-    from service.plot_orbit import MAX_POINTS, dense_orbit, stored_orbit
-
-    info = result["system"]
-    units = info.get("units", {})
-    system = _definition(info, request)
-    geometric, constraint = _geometric_vector(system)
-    momentum = _momentum_vector(system, geometric)
-    names = [geometric.name] + ([momentum.name] if momentum is not None else [])
-    _vector_samples(result["trajectory"], geometric.name)  # the samples are there, or the plot is unavailable
-    orbit = (dense_orbit(result, request, names) if request and "system" in request
-             else stored_orbit(result, names, "no request to integrate again"))
-    t = orbit.t
-    g = orbit.vectors[geometric.name]
-    keep = _thin(len(t), MAX_POINTS)
-
-    fig = _new_figure(11.0, 4.8)
-    fig.nonholonomic_transient = orbit.cut_short  # type: ignore[attr-defined]  # job_plot's flag: not to be cached
-    if g.shape[1] == 2:  # generalized coordinates (q1, q2): the orbit in the plane
-        _plane_orbit(fig.add_subplot(1, 2, 1), g, keep, t, geometric, units)
-    else:
-        _space_orbit(fig.add_subplot(1, 2, 1, projection="3d"), g, keep, t, geometric, constraint, info, units)
-
-    ax = fig.add_subplot(1, 2, 2)
-    if momentum is not None and momentum.name in orbit.vectors:
-        m = orbit.vectors[momentum.name]
-        for k in range(m.shape[1]):
-            ax.plot(t[keep], m[keep, k], linewidth=0.8, in_layout=False, label=_symbol(str(momentum.symbols[k])))
-        ax.set_ylabel(_axis_label(momentum.name, units))
-        ax.set_title(f"{_symbol(momentum.name)}: {momentum.meaning}")
-        ax.legend(loc="upper right")
-    ax.set_xlabel(_axis_label("t", units))
-    ax.grid(alpha=0.3)
-    drawn = "" if len(keep) == len(t) else f", {len(keep)} of them drawn"
-    fig.suptitle(_headline(info, f"trajectory, t in [0, {t[-1]:g}] {units.get('t', 's')}: {orbit.note}{drawn}; "
-                                 f"largest chord sagitta {orbit.sagitta:.0e} × extent"))
-    return fig
-
-
 def _integrals_figure(result: Mapping[str, Any], request: Mapping[str, Any]) -> Figure:
     """Relative drift ``|I(t) − I(0)| / max(|I(0)|, scale)`` of every first integral at the samples."""
     from nonholonomic.evidence.integrals import integral_series, integral_tolerance
@@ -545,6 +473,6 @@ def _lyapunov_figure(result: Mapping[str, Any], request: Mapping[str, Any] | Non
 
 
 _JOB_FIGURES: dict[str, Callable[[Mapping[str, Any], Mapping[str, Any]], Figure]] = {
-    "trajectory": _trajectory_figure, "integrals": _integrals_figure,
+    "integrals": _integrals_figure,
     "poincare": _poincare_figure, "lyapunov": _lyapunov_figure,
 }

@@ -27,8 +27,9 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 #: The policy of every answer that is not a page: nothing may load, nothing may frame it.
 API_POLICY = "default-src 'none'; frame-ancestors 'none'"
-#: The job, ensemble and report pages: the stylesheet and images (plots, favicon) from the service.
-PAGE_POLICY = ("default-src 'none'; style-src 'self'; img-src 'self'; base-uri 'none'; form-action 'none'; "
+#: The job, ensemble and report pages: the stylesheet and images (plots, favicon) from the service; a form
+#: (the trajectory plot's window) that asks the service for the page again.
+PAGE_POLICY = ("default-src 'none'; style-src 'self'; img-src 'self'; base-uri 'none'; form-action 'self'; "
                "frame-ancestors 'none'")
 #: The section explorer: its own script from the service, and its requests back to the service.
 EXPLORE_POLICY = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; connect-src 'self'; "

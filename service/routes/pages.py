@@ -3,22 +3,23 @@ ensembles. Plots of finished jobs, and of an ensemble's finished chunks, are cac
 
 from __future__ import annotations
 
+import math
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from itertools import islice
-from typing import Literal
+from typing import Any, Literal
 
-from fastapi import APIRouter, Request, Response
+from fastapi import APIRouter, Query, Request, Response
 from fastapi.responses import HTMLResponse
 
-from schemas.problems import CONFLICT
+from schemas.problems import CONFLICT, FieldError
 from schemas.report import REPORT_JOB
 from service.access import ensemble_of, job_of
 from service.backends import JobRecord
 from service.deps import Backend, Owner
 from service.ensembles import all_members, members_page, request_units, view
-from service.errors import ProblemError, media_responses, problem_responses
+from service.errors import ProblemError, invalid_request, media_responses, problem_responses
 from service.exports import download, download_responses
 from service.pages import render_ensemble, render_job, render_report, render_report_status
 from service.plot_orbit import TransientImage
@@ -34,6 +35,42 @@ EnsemblePlotName = Literal["poincare", "exponents", "map"]
 PlotFormat = Literal["png", "svg"]
 _HTML = media_responses(["text/html"], "the page")
 _IMAGE = download_responses(["image/png", "image/svg+xml"], "the plot (PNG or SVG, as the path's suffix says)")
+#: The trajectory plot's window (:mod:`service.plot_trajectory`), as the query documents it.
+WINDOW_HELP = {"t_from": "the trajectory plot's window starts here [s] (default: the last stretch of a long run; "
+                         "0 with t_to = t_final: the whole run)",
+               "t_to": "the window ends here [s], at most the run's t_final (default t_final)"}
+
+
+def _number(field: str, text: str | None) -> float | None:
+    """A query's number (None when absent or empty), or a 422 naming ``field``."""
+    if text is None or not text.strip():
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        raise invalid_request([FieldError(field=field, reason=f"must be a number of seconds, not {text[:40]!r}")]) \
+            from None
+
+
+def trajectory_window(t_from: float | None, t_to: float | None, result: dict[str, Any],
+                      name: str) -> tuple[float, float] | None:
+    """The window ``(t_from, t_to)`` asked for (None: the plot's default), or a 422 naming the parameter."""
+    if t_from is None and t_to is None:
+        return None
+    if name != "trajectory":
+        field = "t_from" if t_from is not None else "t_to"
+        raise invalid_request([FieldError(field=field, reason=f"only the trajectory plot takes a window, not {name}")])
+    t_final = float(result["trajectory"]["t"][-1])
+    start = 0.0 if t_from is None else t_from
+    end = t_final if t_to is None else t_to
+    if not math.isfinite(start) or not 0 <= start < t_final:
+        raise invalid_request([FieldError(field="t_from", reason=f"must be a number in [0, {t_final:g}) s (the run's "
+                                                                 f"t_final is {t_final:g} s), not {start:g}")])
+    if not math.isfinite(end) or not start < end <= t_final:
+        raise invalid_request([FieldError(field="t_to", reason=f"must be a number in ({start:g}, {t_final:g}] s "
+                                                               "(after t_from, at most the run's t_final), "
+                                                               f"not {end:g}")])
+    return start, end
 
 
 class _PlotCache:
@@ -73,14 +110,20 @@ def _image(data: bytes, fmt: str, filename: str, request: Request | None = None)
 @router.get("/v1/jobs/{job_id}/page", tags=["jobs"], operation_id="jobs-page", response_class=HTMLResponse,
             responses={**_HTML, **problem_responses({404: "unknown job id"})},
             summary="The job as a page: system, evidence tables with verdicts, plots, links to the exports")
-def job_page(job_id: str, backend: Backend, owner: Owner) -> HTMLResponse:
+def job_page(job_id: str, backend: Backend, owner: Owner,
+             t_from: str | None = Query(None, description=WINDOW_HELP["t_from"] + "; empty: the default"),
+             t_to: str | None = Query(None, description=WINDOW_HELP["t_to"] + "; empty: the default")
+             ) -> HTMLResponse:
     """Reloads itself every 2 s while the job is queued or running."""
     record = job_of(backend, owner, job_id)
     if record.request.get("job") == REPORT_JOB:
         return report_html(record)
+    window = None
+    if record.result is not None and "trajectory" in record.result:  # the page's form sends empty fields
+        window = trajectory_window(_number("t_from", t_from), _number("t_to", t_to), record.result, "trajectory")
     return HTMLResponse(render_job({"id": record.id, "status": record.status, "progress": record.progress,
                                     "created_at": record.created_at, "request": record.request,
-                                    "result": record.result, "error": record.error}))
+                                    "result": record.result, "error": record.error}, window))
 
 
 def report_html(record: JobRecord) -> HTMLResponse:
@@ -99,7 +142,8 @@ def report_html(record: JobRecord) -> HTMLResponse:
             summary="A plot of a job's result (matplotlib): trajectory, integrals, poincare, lyapunov or "
                     "periodic_orbit, PNG or SVG")
 def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Request, backend: Backend,
-                   owner: Owner) -> Response:
+                   owner: Owner, t_from: float | None = Query(None, description=WINDOW_HELP["t_from"]),
+                   t_to: float | None = Query(None, description=WINDOW_HELP["t_to"])) -> Response:
     record = job_of(backend, owner, job_id)
     job_id = record.id
     result = record.result
@@ -108,11 +152,12 @@ def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Req
                                                  "succeeded", CONFLICT)
     if "trajectory" not in result:
         raise ProblemError(409, "No plots", f"job {job_id} is a paper report, not a simulation", CONFLICT)
+    window = trajectory_window(t_from, t_to, result, name)
     from service.plots import PlotUnavailable, job_plot  # matplotlib: imported when the first plot is drawn
 
     try:
-        data = _cache.get(("job", job_id, name, fmt), lambda: job_plot(name, result, record.request, fmt),
-                          keep=True)
+        data = _cache.get(("job", job_id, name, fmt, repr(window)),
+                          lambda: job_plot(name, result, record.request, fmt, window), keep=True)
     except PlotUnavailable as exc:
         raise ProblemError(409, "Plot unavailable", str(exc), CONFLICT) from None
     return _image(data, fmt, f"job-{job_id}-{name}.{fmt}", request)

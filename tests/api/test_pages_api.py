@@ -69,6 +69,30 @@ def test_plots_answer_their_media_type_and_problems_name_the_reason(client):
     assert client.get("/v1/jobs/nope/plots/trajectory.png").status_code == 404
 
 
+def test_the_trajectory_plots_window_is_chosen_on_the_page_and_refused_when_it_is_not_a_window(client):
+    """Issue 35, item 6: the page's form asks for the page again with t_from and t_to; the plot draws that window
+    (its SVG title says so); a window outside the run, backwards or on another plot is a 422 naming the field."""
+    view = _finished(client, t_final=60.0)
+    page = client.get(f"/v1/jobs/{view['id']}/page", params={"t_from": "20", "t_to": "35.5"})
+    assert page.status_code == 200, page.text
+    src = f"/v1/jobs/{view['id']}/plots/trajectory.png?t_from=20.0&t_to=35.5"
+    assert src.replace("&", "&amp;") in page.text and 'name="t_from"' in page.text and 'value="20.0"' in page.text
+    svg = client.get(f"/v1/jobs/{view['id']}/plots/trajectory.svg", params={"t_from": 20, "t_to": 35.5})
+    assert svg.status_code == 200 and b"window t in [20, 35.5] of [0, 60] s" in svg.content
+    whole = client.get(f"/v1/jobs/{view['id']}/plots/trajectory.svg", params={"t_from": 0, "t_to": 60})
+    assert b"t in [0, 60] s" in whole.content and b"window t in" not in whole.content
+    empty = client.get(f"/v1/jobs/{view['id']}/page", params={"t_from": "", "t_to": ""})  # the form, left empty
+    assert empty.status_code == 200 and "plots/trajectory.png?" not in empty.text
+    for params, field in (({"t_from": 70}, "t_from"), ({"t_from": 30, "t_to": 20}, "t_to"),
+                          ({"t_to": 61}, "t_to"), ({"t_from": -1}, "t_from"), ({"t_from": "inf"}, "t_from")):
+        r = client.get(f"/v1/jobs/{view['id']}/plots/trajectory.png", params=params)
+        assert r.status_code == 422 and r.json()["errors"][0]["field"] == field, (params, r.text)
+    r = client.get(f"/v1/jobs/{view['id']}/plots/integrals.png", params={"t_from": 1})
+    assert r.status_code == 422 and "only the trajectory plot" in r.json()["detail"]
+    r = client.get(f"/v1/jobs/{view['id']}/page", params={"t_from": "soon"})
+    assert r.status_code == 422 and r.json()["errors"][0]["field"] == "t_from"
+
+
 def test_an_ensemble_page_and_its_plots(client):
     body = {"system": {"kind": "chaplygin_ball", "inertia": [2.0, 3.0, 4.5], "D": 0.7},
             "members": {"sweep": {"parameter": "D", "values": [0.3, 0.5, 0.7],

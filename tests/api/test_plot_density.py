@@ -10,13 +10,15 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from service import plot_ensemble, plot_orbit, plots
+from service import plot_ensemble, plot_orbit, plot_trajectory, plots
 from tests.api.conftest import BALL, STATE
 from workers.jobs import run_job
 
 #: A ball orbit of many turns stored at the default 201 samples: drawn through them it is all chords.
 LONG = {"system": {**BALL, "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}}, "initial_state": dict(STATE),
         "t_final": 300.0, "samples": 201, "checks": ["integrals"], "lyapunov": {"interval": 1.0}}
+#: The whole run as the window (LONG makes about 23 turns: by default only its last stretch is drawn).
+WHOLE = (0.0, 300.0)
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +69,7 @@ def test_the_dense_curve_passes_through_the_stored_samples(long_job):
 
 def test_the_plotted_orbit_has_no_chords(long_job):
     result, request = long_job
-    fig = plots._trajectory_figure(result, request)
+    fig = plot_trajectory.trajectory_figure(result, request, WHOLE)  # the whole run, asked for
     curve = np.vstack(fig.axes[0].get_lines()[0].get_data_3d()).T
     stored = np.asarray(result["trajectory"]["gamma"])
     before, after = _turning_angles(stored), _turning_angles(curve)
@@ -84,7 +86,7 @@ def test_the_plotted_orbit_has_no_chords(long_job):
     # the momentum against t is as smooth
     for line in fig.axes[1].get_lines():
         assert len(line.get_xdata()) == len(curve)
-    texts = _svg_texts(plots.job_plot("trajectory", result, request, "svg"))
+    texts = _svg_texts(plots.job_plot("trajectory", result, request, "svg", WHOLE))
     assert f"dense output at {len(curve)} times" in texts and "201 stored samples" in texts
 
 
@@ -190,3 +192,59 @@ def test_the_exponent_histogram_says_finite_time_and_which_have_not_converged(lo
     assert marked["not converged"] == 2 and marked["converged"] == 4
     texts = _svg_texts(plots.ensemble_plot("exponents", sweep, members, "svg"))
     assert "finite-time estimates at t = 300 s" in texts and "2 of 6 not converged" in texts
+
+
+def test_a_long_run_is_drawn_as_its_last_stretch_over_the_whole_runs_envelope(long_job):
+    """Issue 35, item 6: past LONG_TURNS turns the plot draws a window, by default the last WINDOW_TURNS turns,
+    densely (through the stored samples inside it), over the whole run in grey, with M's envelope below."""
+    result, request = long_job
+    whole = plot_orbit.dense_orbit(result, request, ["gamma", "M"])
+    along = plot_trajectory.turns(whole.vectors["gamma"])
+    assert along[-1] > plot_trajectory.LONG_TURNS
+    start, end = plot_trajectory.default_window(whole.t, whole.vectors["gamma"])
+    assert end == 300.0 and 0 < start < 300.0
+    inside = along[whole.t >= start]
+    assert abs((inside[-1] - inside[0]) - plot_trajectory.WINDOW_TURNS) < 0.05  # the last 4 turns, to a point
+    fig = plot_trajectory.trajectory_figure(result, request)
+    ax3, ax, strip = fig.axes
+    context, drawn = ax3.get_lines()[0], ax3.get_lines()[1]
+    assert context.get_label() == "whole run" and len(context.get_data_3d()[0]) > 2000
+    curve = np.vstack(drawn.get_data_3d()).T
+    t = ax.get_lines()[0].get_xdata()
+    assert t[0] >= start and t[-1] == 300.0 and len(t) == len(curve)
+    # the window is as dense as the whole run would be: no visible chords, and on the sphere
+    assert plot_orbit.sagitta(curve) <= plot_orbit.SAGITTA_TARGET
+    np.testing.assert_allclose(np.linalg.norm(curve, axis=1), 1.0, atol=1e-12)
+    # through the stored samples inside the window, exactly at their times
+    stored_t = np.asarray(result["trajectory"]["t"])
+    mine = stored_t[(stored_t >= t[0]) & (stored_t <= t[-1])]
+    at = np.searchsorted(t, mine)
+    np.testing.assert_array_equal(t[at], mine)
+    stored = np.asarray(result["trajectory"]["gamma"])[(stored_t >= t[0]) & (stored_t <= t[-1])]
+    np.testing.assert_allclose(curve[at], stored, rtol=0, atol=1e-9)
+    # the strip: each M component's range over the whole run (it holds every sample of the window), the window shaded
+    m = whole.vectors["M"]
+    bands = strip.collections[:3]
+    for k, band in enumerate(bands):
+        lows = band.get_paths()[0].vertices[:, 1]
+        assert lows.min() == pytest.approx(m[:, k].min(), abs=1e-12) and lows.max() == pytest.approx(m[:, k].max(),
+                                                                                                     abs=1e-12)
+    assert strip.get_xlim() == (0.0, 300.0)
+    texts = _svg_texts(plots.job_plot("trajectory", result, request, "svg"))
+    assert f"window t in [{start:g}, 300] of [0, 300] s" in texts and "the last 4 of 23 turns" in texts
+
+
+def test_the_readers_window_is_drawn_densely_even_between_two_stored_samples(long_job):
+    result, request = long_job
+    fig = plot_trajectory.trajectory_figure(result, request, (100.2, 101.2))  # the samples are 1.5 s apart:
+    ax = fig.axes[1]  # one of them (t = 100.5) in the window
+    t = ax.get_lines()[0].get_xdata()
+    assert t[0] >= 100.2 and t[-1] <= 101.2 and len(t) > 500
+    curve = np.vstack(fig.axes[0].get_lines()[1].get_data_3d()).T
+    assert plot_orbit.sagitta(curve) <= plot_orbit.SAGITTA_TARGET
+    np.testing.assert_allclose(np.linalg.norm(curve, axis=1), 1.0, atol=1e-12)  # the orbit, not an interpolation
+    k = int(np.searchsorted(t, 100.5))
+    assert t[k] == 100.5
+    np.testing.assert_allclose(curve[k], result["trajectory"]["gamma"][67], rtol=0, atol=1e-9)  # stored sample 67
+    texts = _svg_texts(plots.job_plot("trajectory", result, request, "svg", (100.2, 101.2)))
+    assert "the reader's window" in texts

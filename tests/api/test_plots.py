@@ -12,7 +12,7 @@ import pytest
 from matplotlib.image import imread
 
 from nonholonomic.systems import SYSTEMS, get_system
-from service import plot_ensemble, plot_orbit, plot_periodic, plots
+from service import plot_ensemble, plot_orbit, plot_periodic, plot_trajectory, plots
 from service.plots import PNG_DPI, PlotUnavailable, ensemble_plot, job_plot
 from tests.api.conftest import BALL, STATE
 from tests.support import poll_job
@@ -74,7 +74,8 @@ def _expected_size(fig) -> tuple[int, int]:
 def test_every_job_plot_renders_png_of_its_size_and_svg_with_labels(ball, name):
     result, request = ball
     png = job_plot(name, result, request, "png")
-    figures = {**plots._JOB_FIGURES, "periodic_orbit": plot_periodic.periodic_orbit_figure}
+    figures = {**plots._JOB_FIGURES, "periodic_orbit": plot_periodic.periodic_orbit_figure,
+               "trajectory": plot_trajectory.trajectory_figure}
     assert _png_size(png) == _expected_size(figures[name](result, request))
     texts = _svg_texts(job_plot(name, result, request, "svg"))
     assert "t [s]" in texts or name in ("poincare", "periodic_orbit")  # time axis with its unit
@@ -220,7 +221,8 @@ def _mesh(result: dict) -> np.ndarray:
 
 def test_veselova_trajectory_gamma_on_the_unit_sphere_and_omega(veselova):
     result, request = veselova
-    fig = plots._trajectory_figure(result, request)
+    whole = (0.0, result["t_final"])  # the example's run is long enough to be drawn as its last stretch by default
+    fig = plot_trajectory.trajectory_figure(result, request, whole)
     ax3, ax = fig.axes
     assert ax3.name == "3d" and ax3.get_xlabel() == "γ₁ [1]" and ax.get_ylabel() == "ω [rad/s]"
     assert len(ax3.collections) == 1  # the wireframe
@@ -228,13 +230,13 @@ def test_veselova_trajectory_gamma_on_the_unit_sphere_and_omega(veselova):
     curve = ax3.get_lines()[0].get_data_3d()
     np.testing.assert_allclose(np.linalg.norm(np.vstack(curve), axis=0), 1.0, atol=1e-12)
     assert [line.get_label() for line in ax.get_lines()] == ["ω₁", "ω₂", "ω₃"]
-    assert _png_size(job_plot("trajectory", result, request, "png")) == _expected_size(fig)
+    assert _png_size(job_plot("trajectory", result, request, "png", whole)) == _expected_size(fig)
 
 
 def test_ball_on_quadric_trajectory_x_on_the_ellipsoid(quadric):
     result, request = quadric
     B = np.diag(request["system"]["B"])
-    fig = plots._trajectory_figure(result, request)
+    fig = plot_trajectory.trajectory_figure(result, request)
     ax3 = fig.axes[0]
     assert ax3.get_zlabel() == "x₃ [m]" and fig.axes[1].get_ylabel() == "ω [rad/s]"
 
@@ -260,7 +262,7 @@ def test_a_long_trajectory_is_plotted_from_capped_points():
         for fmt in plots.FORMATS:
             data = job_plot(name, result, body, fmt)
             assert len(data) < 3_000_000, (name, fmt, len(data))
-    fig = plots._trajectory_figure(result, body)
+    fig = plot_trajectory.trajectory_figure(result, body, (0.0, 1000.0))
     assert len(fig.axes[0].get_lines()[0].get_data_3d()[0]) <= plot_orbit.MAX_POINTS  # dense output, capped
     drift = plots._integrals_figure(result, body).axes[0].get_lines()[0]
     energy = result["integrals"][0]

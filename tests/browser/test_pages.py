@@ -171,7 +171,26 @@ def test_job_page_shows_system_evidence_plots_and_exports(api, browser):
     assert page.eval_on_selector("#checks col", "e => getComputedStyle(e).width") != "auto"
     assert page.locator("dt", has_text="t_final").count() == 1
     assert "Hamiltonization of nonholonomic systems" in page.locator("#cite").inner_text()
+    # a long run (about 23 turns of gamma): the trajectory plot is full width, its window chosen below it
+    assert page.eval_on_selector("img[alt=trajectory]", "e => e.closest('figure').className") == "wide"
+    assert page.locator("#window input[name=t_from]").get_attribute("placeholder") == "last stretch"
     visit.finish("job", api)
+    # the reader's window: the form asks for the page again, whose plot draws t in [100, 130]
+    visit = Visit(browser, f"{api}{location}/page")
+    page = visit.page
+    page.fill("#window input[name=t_from]", "100")
+    page.fill("#window input[name=t_to]", "130")
+    with page.expect_navigation(timeout=GUARD_MS):
+        page.click("#window button[type=submit]")
+    page.wait_for_load_state("networkidle", timeout=GUARD_MS)
+    assert "t_from=100" in page.url and "t_to=130" in page.url
+    windowed = [(src, width) for src, width in visit.images_loaded() if "trajectory.png" in src]
+    assert windowed == [(f"{location}/plots/trajectory.png?t_from=100.0&t_to=130.0", windowed[0][1])], windowed
+    assert windowed[0][1] > 1000  # drawn, full width (11 inches at 110 dpi)
+    assert page.input_value("#window input[name=t_from]") == "100.0"
+    svg = httpx.get(f"{api}{location}/plots/trajectory.svg?t_from=100.0&t_to=130.0", timeout=GUARD_S).text
+    assert "window t in [100, 130] of [0, 300] s" in svg and "whole run" in svg
+    visit.finish("job-window", api)
     # a plot's SVG opened on its own draws under its own policy
     svg = Visit(browser, f"{api}{location}/plots/trajectory.svg", SVG_POLICY)
     assert svg.page.locator("svg path").count() > 0
