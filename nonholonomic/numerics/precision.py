@@ -31,11 +31,11 @@ _DEFAULT_PREC, _DEFAULT_DPS, _DEFAULT_ROUNDING = 53, 15, "n"
 
 
 class _ThreadPrecision(threading.local):
-    """The calling thread's ``prec`` (bits), ``dps`` (digits) and rounding mode."""
+    """The calling thread's ``pair`` (``(prec, rounding)``: bits and rounding mode, as mpmath unpacks them on every
+    operation) and ``dps`` (digits)."""
 
-    prec: int = _DEFAULT_PREC
+    pair: tuple[int, str] = (_DEFAULT_PREC, _DEFAULT_ROUNDING)
     dps: int = _DEFAULT_DPS
-    rounding: str = _DEFAULT_ROUNDING
 
 
 _STATE = _ThreadPrecision()
@@ -47,17 +47,18 @@ class _PrecisionRounding(list):  # mpmath reads a list [prec, rounding]
 
     __slots__ = ()
 
-    def __iter__(self) -> Iterator[Any]:
-        return iter((_STATE.prec, _STATE.rounding))
+    def __iter__(self) -> Iterator[Any]:  # every mpf operation: as little as possible
+        return iter(_STATE.pair)
 
     def __getitem__(self, index: Any) -> Any:
-        return (_STATE.prec, _STATE.rounding)[index]
+        return _STATE.pair[index]
 
     def __setitem__(self, index: Any, value: Any) -> None:
+        prec, rounding = _STATE.pair
         if index in (0, -2):
-            _STATE.prec = value
+            _STATE.pair = (value, rounding)
         elif index in (1, -1):
-            _STATE.rounding = value
+            _STATE.pair = (prec, value)
         else:
             raise IndexError(index)
 
@@ -65,11 +66,23 @@ class _PrecisionRounding(list):  # mpmath reads a list [prec, rounding]
         return 2
 
     def __repr__(self) -> str:
-        return f"[{_STATE.prec}, {_STATE.rounding!r}] (this thread's)"
+        return f"{list(_STATE.pair)} (this thread's)"
 
 
-def _thread_attribute(name: str) -> property:
-    return property(lambda ctx: getattr(_STATE, name), lambda ctx, value: setattr(_STATE, name, value))
+def _get_prec(ctx: Any) -> int:
+    return _STATE.pair[0]
+
+
+def _set_prec(ctx: Any, value: int) -> None:
+    _STATE.pair = (value, _STATE.pair[1])
+
+
+def _get_dps(ctx: Any) -> int:
+    return _STATE.dps
+
+
+def _set_dps(ctx: Any, value: int) -> None:
+    _STATE.dps = value
 
 
 def installed() -> bool:
@@ -97,12 +110,12 @@ def install() -> None:
             or not all(t._ctxdata[2] is shared for t in types)):  # type: ignore[union-attr]
         raise RuntimeError(f"mpmath {mpmath.__version__}: its context is not laid out as "
                            "nonholonomic.numerics.precision expects; its precision cannot be made per thread")
-    _STATE.prec, _STATE.rounding, _STATE.dps = shared[0], shared[1], ctx._dps
+    _STATE.pair, _STATE.dps = (shared[0], shared[1]), ctx._dps
     per_thread = _PrecisionRounding()
     base = type(ctx)
     ctx.__class__ = type("PerThreadMPContext", (base,), {
         "__doc__": "mpmath's context with its precision kept per thread (nonholonomic.numerics.precision).",
-        "_prec": _thread_attribute("prec"), "_dps": _thread_attribute("dps")})
+        "_prec": property(_get_prec, _set_prec), "_dps": property(_get_dps, _set_dps)})
     for name in ("_prec", "_dps"):
         ctx.__dict__.pop(name, None)
     ctx._prec_rounding = per_thread

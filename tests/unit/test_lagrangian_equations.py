@@ -259,7 +259,7 @@ def test_expressions_are_never_evaluated(field, monkeypatch):
     assert info.value.field == "constraints[1]"
 
 
-@pytest.mark.parametrize("name", ["suslov_tilted", "rolling_disk"])
+@pytest.mark.parametrize("name", ["rolling_disk", "chaplygin_sleigh"])  # (suslov_tilted: 33 s, the same paths)
 def test_the_rational_function_elimination_equals_the_expression_tree_fallback(name, monkeypatch):
     """The exact fraction-field path (sin, cos as generators with sin² + cos² = 1) and the LU on expression trees
     give the same q̈ at random states to 1e-12 (and the fast path is the one used)."""
