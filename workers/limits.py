@@ -10,7 +10,11 @@ back to Python, so a job inside one long ``propagate`` call ran on to the hard l
 
 from __future__ import annotations
 
+import logging
+import sys
+import threading
 import time
+import traceback
 
 
 class JobTimeout(RuntimeError):
@@ -25,6 +29,17 @@ def soft_limit_message(limit_s: float) -> str:
 def hard_limit_message(limit_s: float) -> str:
     """The error message of a job killed at its hard time limit."""
     return f"the job was killed at its hard time limit of {limit_s:g} s"
+
+
+def log_thread_stacks(log: logging.Logger, why: str) -> None:
+    """Log where every thread of this process is (a job past its soft limit: which step of it took the time,
+    e.g. a symbolic computation in its own thread, :mod:`nonholonomic.bounded`), for the operator and the
+    developers; the job's own error stays :func:`soft_limit_message`."""
+    names = {t.ident: t.name for t in threading.enumerate()}
+    parts = [f"{why}; the threads of this process:"]
+    for ident, frame in sys._current_frames().items():
+        parts.append(f"-- thread {names.get(ident, ident)}:\n" + "".join(traceback.format_stack(frame, limit=25)))
+    log.warning("\n".join(parts))
 
 
 class Deadline:

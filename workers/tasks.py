@@ -17,7 +17,7 @@ from workers.celery_app import app
 from workers.ensembles import ENSEMBLE_CHUNK, run_ensemble_chunk
 from workers.job_store import ensemble_store, job_store, write_until_stored
 from workers.jobs import InvalidJob, run_job
-from workers.limits import Deadline, JobTimeout, hard_limit_message, soft_limit_message
+from workers.limits import Deadline, JobTimeout, hard_limit_message, log_thread_stacks, soft_limit_message
 
 #: Seconds between progress updates (and cancellation checks) of a running job.
 PROGRESS_INTERVAL_S = 0.2
@@ -122,6 +122,7 @@ def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
         _best_effort(self, states.REVOKED)
         raise Ignore() from None
     except SoftTimeLimitExceeded:
+        log_thread_stacks(log, f"job {job_id} past its soft time limit")
         raise JobTimeout(soft_limit_message(get_settings().job_soft_time_limit_s)) from None
     _record_end(job_id, "succeeded", result=result)
     return {"status": "succeeded"}

@@ -37,7 +37,7 @@ from store.idempotency import IdempotencyKeys, KeyBinding
 from store.jobs import ActiveBoundReached, JobStore, StoredJob
 from workers.ensembles import run_ensemble_chunk
 from workers.jobs import WarmUp, run_job, warm_up
-from workers.limits import Deadline, JobTimeout, soft_limit_message
+from workers.limits import Deadline, JobTimeout, log_thread_stacks, soft_limit_message
 
 log = logging.getLogger(__name__)
 #: Seconds between two looks of the watchdog at the running jobs' time limits.
@@ -207,10 +207,12 @@ class EmbeddedBackend:
             with self._lock:
                 running_now = [r for r in self._running.values() if r.inside]
                 late = [r for r in running_now if now - r.started >= self._soft_limit_s]
-                for running in late:
-                    if not running.interrupted:
-                        running.interrupted = True
-                        _raise_in(running.thread, JobTimeout)
+                stopped = [r for r in late if not r.interrupted]
+                for running in stopped:
+                    running.interrupted = True
+                    _raise_in(running.thread, JobTimeout)
+            for running in stopped:
+                log_thread_stacks(log, f"job {running.job_id} past its soft time limit")
             for running in running_now:
                 if not running.promoted and now - running.started >= self._long_after_s:
                     running.promoted = self._pool.promote(running.thread)
