@@ -80,14 +80,21 @@ def _cell(value: Any) -> Any:
     return value
 
 
-def members_csv(members: Iterable[Mapping[str, Any]], names: Mapping[str, Sequence[str]],
-                units: Mapping[str, str]) -> Iterator[str]:
-    """The members as CSV text: the header of every column any member has (in first-seen order), then one row
-    per member (an empty cell where a member has no such column: a failed member's drift)."""
+def _table(members: Iterable[Mapping[str, Any]], names: Mapping[str, Sequence[str]],
+           units: Mapping[str, str]) -> tuple[list[dict[str, Any]], dict[str, None]]:
+    """The members' rows in index order, and every column any of them has (in first-seen order)."""
     rows = [dict(member_row(m, names, units)) for m in sorted(members, key=lambda m: m["index"])]
     header: dict[str, None] = {}
     for row in rows:
         header.update(dict.fromkeys(row))
+    return rows, header
+
+
+def members_csv(members: Iterable[Mapping[str, Any]], names: Mapping[str, Sequence[str]],
+                units: Mapping[str, str]) -> Iterator[str]:
+    """The members as CSV text: the header of every column any member has (in first-seen order), then one row
+    per member (an empty cell where a member has no such column: a failed member's drift)."""
+    rows, header = _table(members, names, units)
     if not header:
         header = dict.fromkeys(("member", "status"))
     buffer = io.StringIO()
@@ -121,10 +128,7 @@ def members_netcdf(ensemble_id: str, record: Mapping[str, Any], members: Iterabl
 
     from service.exports_netcdf import CONVENTIONS, REFERENCES, write_netcdf
 
-    rows = [dict(member_row(m, names, units)) for m in sorted(members, key=lambda m: m["index"])]
-    header: dict[str, None] = {}
-    for row in rows:
-        header.update(dict.fromkeys(row))
+    rows, header = _table(members, names, units)
     index = np.array([row["member"] for row in rows], dtype=np.int64)
     variables: dict[str, Any] = {}
     for column in header:

@@ -184,10 +184,8 @@ def _compute(result: Mapping[str, Any], request: Mapping[str, Any], names: Seque
     if window is None:
         cut = np.ones(max(len(stored_t) - 1, 1), dtype=bool)  # which stored intervals are cut finer
     else:
-        cut = (stored_t[1:] > window[0]) & (stored_t[:-1] < window[1])
-        if window[0] == window[1] or not cut.any():
-            cut = (stored_t[1:] >= window[0]) & (stored_t[:-1] <= window[1])
-        cut = cut[:int(np.nonzero(cut)[0].max()) + 1] if cut.any() else cut[:1]  # the grid ends with the window
+        cut = (stored_t[1:] > window[0]) & (stored_t[:-1] < window[1])  # the intervals the window meets
+        cut = cut[:int(np.flatnonzero(cut).max()) + 1] if cut.any() else cut[:0]  # the grid ends with the window
 
     def fallback(why: str | None = None, cut_short: bool = False) -> Orbit:
         orbit = stored_orbit(result, names, why, cut_short)
