@@ -28,6 +28,7 @@ from nonholonomic.numerics.kernels import numeric, parameter_vector, state_vecto
 if TYPE_CHECKING:
     from nonholonomic.analysis.lyapunov import Spectrum
     from nonholonomic.analysis.periodic_orbit import PeriodicOrbit
+    from nonholonomic.analysis.periodic_orbit.branch import OrbitBranch
     from nonholonomic.analysis.periodic_orbit.continuation import Branch
     from nonholonomic.analysis.poincare import Section
 
@@ -60,6 +61,7 @@ class SimulationResult:
     lyapunov: Spectrum | None = None
     periodic_orbit: PeriodicOrbit | None = None
     continuation: Branch | None = None
+    branch: OrbitBranch | None = None
 
     def state(self, name: str) -> np.ndarray:
         """Samples of the state vector ``name`` (shape ``(n, 3)``), or of a derived vector."""
@@ -142,7 +144,7 @@ def simulate(
     parts = 1 + (poincare is not None) + (lyapunov is not None) + (periodic_orbit is not None)
     trajectory = integrate(system, p, y0, t_final, samples, engine=engine, tolerance=tolerance,
                            progress=phase(progress, 0.0, 1.0 / parts))
-    section = spectrum = orbit = branch = None
+    section = spectrum = orbit = branch = orbit_branch = None
     done = 1
     if poincare is not None:
         section = poincare.run(system, p, y0, t_final, tolerance=tolerance,
@@ -153,10 +155,10 @@ def simulate(
                                 progress=phase(progress, done / parts, (done + 1) / parts))
         done += 1
     if periodic_orbit is not None:
-        orbit, branch = periodic_orbit.run(system, p, y0, t_final, tolerance=tolerance,
+        orbit, branch, orbit_branch = periodic_orbit.run(system, p, y0, t_final, tolerance=tolerance,
                                            progress=phase(progress, done / parts, 1.0))
     derived, integrals, found = evidence(system, p, trajectory, checks)
     time_checks, time_warnings = time_change_evidence(system, trajectory)
     return SimulationResult(system, p, trajectory, derived, integrals, found + time_checks,
                             parameter_warnings(system, parameters) + time_warnings, projections, section, spectrum,
-                            orbit, branch)
+                            orbit, branch, orbit_branch)

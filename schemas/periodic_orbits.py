@@ -13,6 +13,7 @@ from nonholonomic.analysis.periodic_orbit import MAX_PERIOD, PeriodicOrbitError,
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.initial_state import FieldProblem, vector_slice
 from nonholonomic.numerics.kernels import parameter_vector
+from schemas.branches import OrbitBranchRequest, OrbitBranchResult
 from schemas.sweeps import sweep_target, swept
 from schemas.systems import FiniteFloat
 
@@ -52,6 +53,10 @@ class PeriodicOrbitRequest(BaseModel):
                                                 "user's system)")
     sweep: OrbitSweep | None = Field(None, description="continue the orbit in a parameter, flagging folds and "
                                                        "period doublings")
+    branch: OrbitBranchRequest | None = Field(None, description="follow the orbit as a branch in the energy or a "
+                                                                "parameter by pseudo-arclength continuation, "
+                                                                "through folds, its bifurcations located and the "
+                                                                "period-2k branch followed at a period doubling")
 
     def problems(self, system: MechanicalSystem, parameters: dict[str, Any], t_final: float,
                  tolerance: float | None, prefix: str = "periodic_orbit") -> list[FieldProblem]:
@@ -61,13 +66,13 @@ class PeriodicOrbitRequest(BaseModel):
                           tolerance, self.coordinates)
         except PeriodicOrbitError as exc:
             return [FieldProblem(f"{prefix}.{exc.field}", exc.reason)]
+        found = [] if self.branch is None else self.branch.problems(system, parameters, f"{prefix}.branch")
         if self.sweep is None:
-            return []
+            return found
         try:
             group, index = sweep_target(system, self.sweep.parameter)
         except ValueError as exc:
-            return [FieldProblem(f"{prefix}.sweep.parameter", str(exc))]
-        found = []
+            return found + [FieldProblem(f"{prefix}.sweep.parameter", str(exc))]
         for i, value in enumerate(self.sweep.values):
             try:
                 parameter_vector(system, swept(parameters, group, index, value))
@@ -85,7 +90,8 @@ class PeriodicOrbitRequest(BaseModel):
             None if self.coordinates is None else (self.coordinates[0], self.coordinates[1]),
             None if self.level is None else tuple(self.level),
             None if self.sweep is None else self.sweep.parameter,
-            () if self.sweep is None else tuple(self.sweep.values), vectors)
+            () if self.sweep is None else tuple(self.sweep.values), vectors,
+            None if self.branch is None else self.branch.options(system, parameters))
 
 
 class Multiplier(BaseModel):
@@ -174,6 +180,7 @@ class PeriodicOrbitResult(BaseModel):
     warnings: list[str]
     units: dict[str, str]
     continuation: ContinuationResult | None = None
+    branch: OrbitBranchResult | None = Field(None, description="the branch by pseudo-arclength, when asked for")
 
 
 def _finite(v: float | None) -> float | None:
@@ -210,7 +217,7 @@ def orbit_to_json(system: MechanicalSystem, orbit: Any) -> dict[str, Any]:
                    "family_dimension": orbit.family_dimension, "wall_time_s": orbit.search_time_s},
         "wall_time_s": orbit.wall_time_s, "warnings": list(orbit.warnings),
         "units": {"period_t": "s", "crossing_times": "s", **({"period_tau": reduced.unit} if reduced else {})},
-        "continuation": None,
+        "continuation": None, "branch": None,
     }
 
 

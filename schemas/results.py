@@ -15,6 +15,7 @@ from nonholonomic.definition import MechanicalSystem
 from nonholonomic.evidence.time_change import domain_json
 from nonholonomic.simulation import SimulationResult
 from schemas.analysis import SectionResult, SpectrumResult, section_to_json, spectrum_to_json
+from schemas.branches import orbit_branch_to_json
 from schemas.periodic_orbits import PeriodicOrbitResult, branch_to_json, orbit_to_json
 
 
@@ -255,6 +256,8 @@ def _periodic_orbit(result: SimulationResult) -> dict[str, Any] | None:
     out = orbit_to_json(result.system, result.periodic_orbit)
     if result.continuation is not None:
         out["continuation"] = branch_to_json(result.system, result.continuation)
+    if result.branch is not None:
+        out["branch"] = orbit_branch_to_json(result.system, result.branch)
     return out
 
 

@@ -116,6 +116,27 @@ def _variable_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_]+", "_", name).strip("_") or "column"
 
 
+def table_variables(rows: Sequence[Mapping[str, Any]], columns: Iterable[str], dimension: str,
+                    flags: Mapping[str, str]) -> dict[str, Any]:
+    """A table's columns as NetCDF variables along ``dimension``: each named after its header (``units`` and the
+    header as ``long_name``); numbers as float64 (NaN where a row has none), the columns in ``flags`` as int8 CF
+    flags (-1 none, 0 false, 1 true; ``flags`` gives their meanings), the rest as strings."""
+    variables: dict[str, Any] = {}
+    for column in columns:
+        name, unit = _header_parts(column)
+        values = [row.get(column) for row in rows]
+        meta: dict[str, Any] = {"long_name": column, **({"units": unit} if unit else {})}
+        if name in flags:
+            data = np.array([-1 if v is None else int(bool(v)) for v in values], dtype=np.int8)
+            meta.update(flag_values=np.array([-1, 0, 1], np.int8), flag_meanings=flags[name])
+        elif all(v is None or isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+            data = np.array([np.nan if v is None else float(v) for v in values], dtype=np.float64)
+        else:
+            data = np.array(["" if v is None else str(v) for v in values], dtype=object)
+        variables[_variable_name(name)] = (dimension, data, meta)
+    return variables
+
+
 def members_netcdf(ensemble_id: str, record: Mapping[str, Any], members: Iterable[Mapping[str, Any]],
                    names: Mapping[str, Sequence[str]], units: Mapping[str, str]) -> bytes:
     """The members table (:func:`members_csv`'s columns) as NetCDF-4: dimension ``member`` (the coordinate, the
@@ -130,21 +151,8 @@ def members_netcdf(ensemble_id: str, record: Mapping[str, Any], members: Iterabl
 
     rows, header = _table(members, names, units)
     index = np.array([row["member"] for row in rows], dtype=np.int64)
-    variables: dict[str, Any] = {}
-    for column in header:
-        if column == "member":
-            continue
-        name, unit = _header_parts(column)
-        values = [row.get(column) for row in rows]
-        meta: dict[str, Any] = {"long_name": column, **({"units": unit} if unit else {})}
-        if name == "checks_passed":
-            data = np.array([-1 if v is None else int(bool(v)) for v in values], dtype=np.int8)
-            meta.update(flag_values=np.array([-1, 0, 1], np.int8), flag_meanings="not_checked failed passed")
-        elif all(v is None or isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
-            data = np.array([np.nan if v is None else float(v) for v in values], dtype=np.float64)
-        else:
-            data = np.array(["" if v is None else str(v) for v in values], dtype=object)
-        variables[_variable_name(name)] = ("member", data, meta)
+    variables = table_variables(rows, [c for c in header if c != "member"], "member",
+                                {"checks_passed": "not_checked failed passed"})
     coords = {"member": ("member", index, {"long_name": "ensemble member index"})}
     request = record["request"]
     attrs = {

@@ -30,6 +30,10 @@ JOB_PLOT_CAPTIONS = {
                 "whether they have converged",
     "periodic_orbit": "the periodic orbit's multipliers on the complex plane (on the unit circle: elliptic); the "
                       "continuation's trace against the swept parameter, or Newton's closing residual per step",
+    "bifurcation": "the branch of periodic orbits: a section coordinate of the orbit, and the section map's trace, "
+                   "against the continued value; solid where the orbit is elliptic (stable), dashed where not; the "
+                   "located bifurcations marked (F fold, PD period doubling, R3/R4 resonances) and the period-2k "
+                   "branches switched onto at the period doublings in their own colours",
 }
 ENSEMBLE_PLOT_CAPTIONS = {
     "poincare": "every member's section points, one colour per member",
@@ -123,7 +127,8 @@ def job_plots(result: dict[str, Any] | None, status: str = "succeeded") -> list[
     record = registered(str((result.get("system") or {}).get("kind")))
     own = record is not None and record.written_by_user
     return [(name, TRAJECTORY_CAPTION_OWN if own and name == "trajectory" else caption)
-            for name, caption in JOB_PLOT_CAPTIONS.items() if name in ("trajectory", "integrals") or result.get(name)]
+            for name, caption in JOB_PLOT_CAPTIONS.items() if name in ("trajectory", "integrals") or result.get(name)
+            or (name == "bifurcation" and (result.get("periodic_orbit") or {}).get("branch"))]
 
 
 def ensemble_plots(view: dict[str, Any]) -> list[tuple[str, str, str | None]]:

@@ -49,7 +49,7 @@ from nonholonomic.systems import get_system, registered
 if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType
 
-JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit")
+JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit", "bifurcation")
 ENSEMBLE_PLOTS: tuple[str, ...] = ("poincare", "exponents", "map")
 FORMATS = {"png": "image/png", "svg": "image/svg+xml"}
 
@@ -119,10 +119,11 @@ def job_plot(name: str, result: dict, request: dict, fmt: str, window: tuple[flo
     _check(name, JOB_PLOTS, fmt)
     if not isinstance(result, Mapping) or "trajectory" not in result:
         raise PlotUnavailable("this job has no simulation result to plot (a paper report, or no result yet)")
-    from service.plot_periodic import periodic_orbit_figure  # their own modules, which import this one
+    from service.plot_branch import bifurcation_figure  # their own modules, which import this one
+    from service.plot_periodic import periodic_orbit_figure
     from service.plot_trajectory import trajectory_figure
 
-    figures = {**_JOB_FIGURES, "periodic_orbit": periodic_orbit_figure,
+    figures = {**_JOB_FIGURES, "periodic_orbit": periodic_orbit_figure, "bifurcation": bifurcation_figure,
                "trajectory": lambda r, q: trajectory_figure(r, q, window)}
     with _LOCK, matplotlib.rc_context(_STYLE):
         fig = figures[name](result, request)

@@ -24,7 +24,8 @@ import numpy as np
 
 from nonholonomic_client import frames
 from nonholonomic_client.base import DEFAULT_URL, TERMINAL, Progress, default_url
-from nonholonomic_client.errors import ApiError, JobFailed
+from nonholonomic_client.errors import ApiError
+from nonholonomic_client.orbits import OrbitRoutes
 from nonholonomic_client.progress import notebook_progress
 from nonholonomic_client.symbolic import SymbolicRoutes
 
@@ -40,7 +41,7 @@ FILE_FORMATS = ("csv", "npz", "netcdf")
 MEMBERS_PAGE = 1000
 
 
-class Client(SymbolicRoutes):
+class Client(OrbitRoutes, SymbolicRoutes):
     """A client of the nonholonomic API: every route as a method; every error answer raises
     :class:`ApiError`. Made as :class:`~nonholonomic_client.base.BaseClient` (``base_url``,
     ``timeout``, ``api_key``, ``transport``); use it as a context manager.
@@ -527,33 +528,6 @@ class Client(SymbolicRoutes):
             return data
         return frames.map_dataset(data, self.ensemble(ensemble_id))
 
-    def periodic_orbit(self, job_id: str, format: Literal["pandas", "json"] = "pandas",  # noqa: A002
-                       ) -> dict[str, Any] | pandas.DataFrame:
-        """A job's periodic orbit (it asked for ``periodic_orbit``) and its continuation.
-
-        Parameters
-        ----------
-        job_id : str
-            The job's id (or its first characters).
-        format : {"pandas", "json"}, default "pandas"
-            ``pandas`` (the ``[notebook]`` extra): one row per parameter value of the continuation, indexed
-            by the parameter's name (``D``): ``status``, ``period_t``, ``trace``, ``stability``, ``residual``,
-            ``checks_passed``, the section multipliers, and ``fold`` / ``period_doubling`` / ``lost``
-            flags on the first point past each bifurcation; the orbit, the events and the skipped values
-            in ``attrs`` (:func:`nonholonomic_client.frames.periodic_orbit_frame`). ``json``: the result's
-            ``periodic_orbit``.
-
-        Raises
-        ------
-        ApiError
-            If the job has not succeeded, or asked for no periodic orbit.
-        """
-        orbit = self._succeeded(self.job(job_id, trajectory=False), job_id).get("periodic_orbit")
-        if orbit is None:
-            raise ApiError({"type": "/problems/conflict", "title": "No periodic orbit", "status": None,
-                            "detail": f"job {job_id} asked for no periodic orbit (request.periodic_orbit)"})
-        return orbit if format == "json" else frames.periodic_orbit_frame(orbit)
-
     def exponents(self, ident: str, format: Literal["json", "pandas"] = "pandas", *,  # noqa: A002
                   of: Literal["job", "ensemble"] | None = None) -> dict[str, Any] | pandas.DataFrame:
         """The Lyapunov exponents of a job (its spectrum) or of an ensemble (each member's).
@@ -601,12 +575,3 @@ class Client(SymbolicRoutes):
         """
         lyapunov = self.exponents(job_id, format="json", of="job")
         return frames.convergence_frame(lyapunov)
-
-    @staticmethod
-    def _succeeded(view: Mapping[str, Any], ident: str) -> dict[str, Any]:
-        if view.get("status") == "succeeded" and view.get("result") is not None:
-            return dict(view["result"])
-        if view.get("status") in TERMINAL:
-            raise JobFailed("job", dict(view))
-        raise ApiError({"type": "/problems/conflict", "title": "No result yet", "status": None,
-                        "detail": f"job {ident} is {view.get('status')}; wait for it first"})

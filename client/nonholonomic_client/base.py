@@ -155,3 +155,11 @@ class BaseClient:
                 pause = min(poll, remaining)
             time.sleep(pause)
 
+    @staticmethod
+    def _succeeded(view: Mapping[str, Any], ident: str) -> dict[str, Any]:
+        if view.get("status") == "succeeded" and view.get("result") is not None:
+            return dict(view["result"])
+        if view.get("status") in TERMINAL:
+            raise JobFailed("job", dict(view))
+        raise ApiError({"type": "/problems/conflict", "title": "No result yet", "status": None,
+                        "detail": f"job {ident} is {view.get('status')}; wait for it first"})

@@ -83,10 +83,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("ident", metavar="ID")
     p.add_argument("--out", metavar="FILE", required=True,
                    help="where to write; the suffix names the format: a job's trajectory or section (.csv, .npz, "
-                        ".nc, .json), an ensemble's section (.csv, .npz, .nc), a chaos map (.csv, .nc, .json), an "
+                        ".nc, .json), a job's branch (.csv, .nc, .json), an ensemble's section (.csv, .npz, .nc), a "
+                        "chaos map (.csv, .nc, .json), an "
                         "ensemble's members table (.csv, .nc)")
-    p.add_argument("--what", choices=("trajectory", "section", "map", "members", "result"),
+    p.add_argument("--what", choices=("trajectory", "section", "branch", "map", "members", "result"),
                    help="what to save (default: a job's trajectory, an ensemble's section, a chaos map's map; "
+                        "branch: a job's branch of periodic orbits, one row per orbit and bifurcation; "
                         "members: an ensemble's table, one row per member; "
                         "result: the job's whole result, or the ensemble's view, as .json)")
     p.set_defaults(func=commands.get)

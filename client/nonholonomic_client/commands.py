@@ -175,13 +175,14 @@ def ensemble(args: argparse.Namespace) -> int:
 
 #: What ``get`` writes, by what is asked for: the suffixes each takes.
 GET_FORMATS = {("job", "trajectory"): ("csv", "npz", "nc", "json"), ("job", "section"): ("csv", "npz", "nc", "json"),
-               ("job", "result"): ("json",), ("ensemble", "section"): ("csv", "npz", "nc"),
+               ("job", "result"): ("json",), ("job", "branch"): ("csv", "nc", "json"),
+               ("ensemble", "section"): ("csv", "npz", "nc"),
                ("ensemble", "map"): ("csv", "nc", "json"), ("ensemble", "members"): ("csv", "nc"),
                ("ensemble", "result"): ("json",)}
 
 
 def get(args: argparse.Namespace) -> int:
-    """``nonholonomic get ID --out FILE [--what W]``: an existing job's trajectory, section or result, or an
+    """``nonholonomic get ID --out FILE [--what W]``: an existing job's trajectory, section, branch or result, or an
     ensemble's section, map, members table or view, in the format the suffix names (issue 35, items 2 and 3)."""
     with _client(args) as api:
         try:
@@ -196,7 +197,7 @@ def get(args: argparse.Namespace) -> int:
         what = args.what or ("trajectory" if what_is == "job" else "map" if chaos_map else "section")
         allowed = GET_FORMATS.get((what_is, what))
         if allowed is None:
-            raise UsageError(f"a {what_is} has no {what}; a job: trajectory, section, result; an ensemble: "
+            raise UsageError(f"a {what_is} has no {what}; a job: trajectory, section, branch, result; an ensemble: "
                              "section, map, members, result")
         fmt = out_format(args.out, allowed)
         server_format = served(fmt)
@@ -207,6 +208,11 @@ def get(args: argparse.Namespace) -> int:
             api.trajectory(ident, server_format, out=args.out)  # type: ignore[arg-type]  # a suffix allowed
         elif what == "section":
             api.section(ident, server_format, out=args.out, of=what_is)  # type: ignore[arg-type]  # a suffix allowed
+        elif what == "branch":
+            if server_format == "json":
+                Path(args.out).write_text(json.dumps(api.branch(ident, "json"), indent=1) + "\n", encoding="utf-8")
+            else:
+                api.branch(ident, server_format, out=args.out)  # type: ignore[arg-type]  # a suffix allowed
         elif what == "members":
             api.members(ident, format=server_format, out=args.out)  # type: ignore[arg-type]  # a suffix allowed
         else:

@@ -6,7 +6,7 @@ orbit, ``run_batch`` on the members of an ensemble chunk.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any, NotRequired, TypedDict
 
 import numpy as np
@@ -100,8 +100,9 @@ class SpectrumOptions:
 @dataclass(frozen=True)
 class PeriodicOrbitOptions:
     """A periodic orbit of the ``period``-th return map to ``surface = value``, seeded by the job's initial state
-    (:mod:`.periodic_orbit`), and its continuation through ``sweep_vectors`` (one parameter vector per value of
-    ``sweep_parameter``, :mod:`nonholonomic.analysis.periodic_orbit.continuation`)."""
+    (:mod:`.periodic_orbit`), its continuation through ``sweep_vectors`` (one parameter vector per value of
+    ``sweep_parameter``, :mod:`nonholonomic.analysis.periodic_orbit.continuation`), and its branch by
+    pseudo-arclength (``branch``, :mod:`nonholonomic.analysis.periodic_orbit.branch`)."""
 
     surface: str
     value: float = 0.0
@@ -112,23 +113,36 @@ class PeriodicOrbitOptions:
     sweep_parameter: str | None = None
     sweep_values: tuple[float, ...] = ()
     sweep_vectors: tuple[np.ndarray, ...] = ()
+    branch: Any = None  # BranchOptions (imported lazily with the solver)
 
     def run(self, system: MechanicalSystem, p: np.ndarray, y0: np.ndarray, t_final: float, *,
-            tolerance: float | None = None, progress: ProgressCallback | None = None) -> tuple[Any, Any]:
-        """The orbit and, with a sweep, its :class:`~nonholonomic.analysis.periodic_orbit.continuation.Branch`
-        (None without one, or when the orbit was not closed: there is nothing to continue)."""
+            tolerance: float | None = None, progress: ProgressCallback | None = None) -> tuple[Any, Any, Any]:
+        """The orbit; with a sweep, its :class:`~nonholonomic.analysis.periodic_orbit.continuation.Branch`; with a
+        branch, its :class:`~nonholonomic.analysis.periodic_orbit.branch.OrbitBranch` (None when not asked for,
+        or when the orbit was not closed: there is nothing to continue)."""
         from nonholonomic.analysis.periodic_orbit import find_periodic_orbit
+        from nonholonomic.analysis.periodic_orbit.branch import follow_branch
         from nonholonomic.analysis.periodic_orbit.continuation import continue_orbit
         from nonholonomic.numerics.integration import MACHINE_EPSILON
 
-        share = 1.0 / (1 + bool(self.sweep_values))
-        first = None if progress is None else (lambda f: progress(share * f))
+        parts = 1 + bool(self.sweep_values) + (self.branch is not None)
+
+        def part(i: int) -> ProgressCallback | None:
+            return None if progress is None else (lambda f: progress((i + f) / parts))
+
         orbit = find_periodic_orbit(system, p, y0, self.surface, value=self.value, direction=self.direction,
                                     period=self.period, level=self.level, coordinates=self.coordinates,
-                                    t_final=t_final, tolerance=tolerance, progress=first)
-        if not self.sweep_values or not orbit.closed:
-            return orbit, None
-        rest = None if progress is None else (lambda f: progress(share + (1 - share) * f))
-        branch = continue_orbit(system, orbit, self.sweep_parameter or "", self.sweep_values, self.sweep_vectors,
-                                tolerance=MACHINE_EPSILON if tolerance is None else tolerance, progress=rest)
-        return orbit, branch
+                                    t_final=t_final, tolerance=tolerance, progress=part(0))
+        if self.branch is not None and orbit.status != "found":
+            orbit = replace(orbit, warnings=orbit.warnings + (
+                f"no branch: the orbit is {orbit.status}, a branch is followed from an isolated orbit found",))
+        if not orbit.closed:
+            return orbit, None, None
+        tol = MACHINE_EPSILON if tolerance is None else tolerance
+        sweep = branch = None
+        if self.sweep_values:
+            sweep = continue_orbit(system, orbit, self.sweep_parameter or "", self.sweep_values, self.sweep_vectors,
+                                   tolerance=tol, progress=part(1))
+        if self.branch is not None and orbit.status == "found":
+            branch = follow_branch(system, p, orbit, self.branch, tolerance=tol, progress=part(parts - 1))
+        return orbit, sweep, branch

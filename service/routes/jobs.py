@@ -9,6 +9,7 @@ from fastapi.responses import JSONResponse
 from starlette.concurrency import run_in_threadpool
 
 from schemas.analysis import SectionExport
+from schemas.branches import OrbitBranchResult
 from schemas.job_list import DEFAULT_LIMIT, MAX_LIMIT, STATUSES, JobList, JobListItem, job_kind
 from schemas.jobs import JobAccepted, JobRequest, JobView
 from schemas.problems import CONFLICT, NOT_FOUND, FieldError
@@ -17,6 +18,7 @@ from service.access import job_of
 from service.admission import admit_job
 from service.backends import JobRecord
 from service.backends.base import InvalidCursor
+from service.branch_table import branch_csv
 from service.deps import AppSettings, Backend, Owner
 from service.errors import (
     INVALID,
@@ -175,6 +177,43 @@ def get_section(job_id: str, request: Request, backend: Backend, owner: Owner,
         body = section_netcdf(job_id, record.created_at, result, record.request)
         return download(request, body, MEDIA_TYPES[format], filename)
     return json_download(request, {"units": units, **result["poincare"]}, filename)
+
+
+BranchFormat = Literal["json", "csv", "netcdf"]
+
+
+@router.get("/{job_id}/branch", operation_id="jobs-branch", response_model=OrbitBranchResult,
+            responses={**download_responses(_FILE_TYPES, "the branch: JSON (format=json, the result's "
+                                                         "periodic_orbit.branch), CSV (format=csv, one row per "
+                                                         "point and per bifurcation) or NetCDF-4 (format=netcdf)"),
+                       **problem_responses({404: "unknown job id", 409: "the job has not succeeded (yet), or asked "
+                                                                        "for no branch (periodic_orbit.branch)",
+                                            422: "unknown format", 503: UNAVAILABLE_BACKEND})},
+            summary="The job's branch of periodic orbits as JSON, CSV or NetCDF (points and located bifurcations)")
+def get_branch(job_id: str, request: Request, backend: Backend, owner: Owner,
+               format: BranchFormat = Query("json", description="json, csv or netcdf")) -> Response:  # noqa: A002
+    """The branch a job asked for (``periodic_orbit.branch``), with the branches switched onto at its period
+    doublings. CSV and NetCDF: one row per point and per located bifurcation (``kind`` says which), columns
+    ``branch``, ``period``, ``index``, the continued value named after it with its unit, ``arclength``,
+    ``period_t [s]``, ``period_tau``, the section coordinates, ``trace``, ``stability``, the section multipliers,
+    ``residual``, ``residual_independent``, ``checks_passed``, ``located``, ``test_function``."""
+    record = _succeeded(backend, owner, job_id, "branch")
+    job_id = record.id
+    result = record.result
+    assert result is not None
+    branch = (result.get("periodic_orbit") or {}).get("branch")
+    if not branch:
+        raise ProblemError(409, "No branch", f"job {job_id} asked for no branch (periodic_orbit.branch), or its "
+                                             "orbit was not found", CONFLICT)
+    filename = f"job-{job_id}-branch.{SUFFIXES[format]}"
+    if format == "csv":
+        return download(request, branch_csv(result), MEDIA_TYPES[format], filename)
+    if format == "netcdf":
+        from service.branch_table import branch_netcdf
+
+        return download(request, branch_netcdf(job_id, record.created_at, result, record.request),
+                        MEDIA_TYPES[format], filename)
+    return json_download(request, branch, filename)
 
 
 @router.delete("/{job_id}", status_code=202, operation_id="jobs-cancel", response_model=JobView,

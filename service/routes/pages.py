@@ -30,7 +30,7 @@ router = APIRouter()
 PAGE_MEMBERS = 50
 #: Rendered plots kept in memory (finished jobs and ensembles only).
 PLOT_CACHE_SIZE = 64
-JobPlotName = Literal["trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit"]
+JobPlotName = Literal["trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit", "bifurcation"]
 EnsemblePlotName = Literal["poincare", "exponents", "map"]
 PlotFormat = Literal["png", "svg"]
 _HTML = media_responses(["text/html"], "the page")
@@ -108,7 +108,8 @@ def _image(data: bytes, fmt: str, filename: str, request: Request | None = None)
 
 
 @router.get("/v1/jobs/{job_id}/page", tags=["jobs"], operation_id="jobs-page", response_class=HTMLResponse,
-            responses={**_HTML, **problem_responses({404: "unknown job id"})},
+            responses={**_HTML, **problem_responses({404: "unknown job id",
+                                                     422: "t_from or t_to is not a time within the run"})},
             summary="The job as a page: system, evidence tables with verdicts, plots, links to the exports")
 def job_page(job_id: str, backend: Backend, owner: Owner,
              t_from: str | None = Query(None, description=WINDOW_HELP["t_from"] + "; empty: the default"),
@@ -139,8 +140,8 @@ def report_html(record: JobRecord) -> HTMLResponse:
             responses={**_IMAGE, **problem_responses({404: "unknown job id",
                                                       409: "the job has not succeeded, or asked for no such analysis",
                                                       422: "unknown plot name or format"})},
-            summary="A plot of a job's result (matplotlib): trajectory, integrals, poincare, lyapunov or "
-                    "periodic_orbit, PNG or SVG")
+            summary="A plot of a job's result (matplotlib): trajectory, integrals, poincare, lyapunov, "
+                    "periodic_orbit or bifurcation, PNG or SVG")
 def job_plot_route(job_id: str, name: JobPlotName, fmt: PlotFormat, request: Request, backend: Backend,
                    owner: Owner, t_from: float | None = Query(None, description=WINDOW_HELP["t_from"]),
                    t_to: float | None = Query(None, description=WINDOW_HELP["t_to"])) -> Response:

@@ -74,6 +74,14 @@ def test_a_seed_that_does_not_return_gives_not_found_with_its_reason_and_the_job
     ({"surface": "gamma3", "sweep": {"parameter": "Q", "values": [1.0]}}, "periodic_orbit.sweep.parameter", ["Q"]),
     ({"surface": "gamma3", "sweep": {"parameter": "D", "values": [-1.0]}}, "periodic_orbit.sweep.values[0]", []),
     ({"surface": "gamma3", "sweep": {"parameter": "D", "values": []}}, "periodic_orbit.sweep.values", []),
+    ({"surface": "gamma3", "branch": {"in": "Q", "to": 1.0}}, "periodic_orbit.branch.in", ["Q"]),
+    ({"surface": "gamma3", "branch": {"in": "D", "to": -1.0}}, "periodic_orbit.branch.to", []),
+    ({"surface": "gamma3", "branch": {"in": "energy", "to": 1.0, "step": 0.5, "max_step": 0.2}},
+     "periodic_orbit.branch.step", ["max_step"]),
+    ({"surface": "gamma3", "branch": {"in": "energy", "to": 1.0, "max_points": 1}}, "periodic_orbit.branch.max_points",
+     []),
+    ({"surface": "gamma3", "branch": {"in": "energy"}}, "periodic_orbit.branch.to", []),
+    ({"surface": "gamma3", "branch": {"in": "energy", "to": 1.0, "bogus": 1}}, "periodic_orbit.branch.bogus", []),
 ])
 def test_bad_periodic_orbit_blocks_are_422_naming_the_field(client, block, field, words):
     r = client.post("/v1/jobs", json=job(periodic_orbit=block))

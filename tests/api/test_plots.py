@@ -12,7 +12,7 @@ import pytest
 from matplotlib.image import imread
 
 from nonholonomic.systems import SYSTEMS, get_system
-from service import plot_ensemble, plot_orbit, plot_periodic, plot_trajectory, plots
+from service import plot_branch, plot_ensemble, plot_orbit, plot_periodic, plot_trajectory, plots
 from service.plots import PNG_DPI, PlotUnavailable, ensemble_plot, job_plot
 from tests.api.conftest import BALL, STATE
 from tests.support import poll_job
@@ -27,6 +27,14 @@ BALL_JOB = {
     "poincare": {"surface": "gamma3", "value": 0.0, "direction": "increasing", "coordinates": ["gamma1", "M3"]},
     "lyapunov": {"interval": 1.0},
     "periodic_orbit": {"surface": "gamma3", "coordinates": ["gamma1", "M3"]},
+}
+#: The island's centre (tests/api/test_periodic_orbits_api.py) followed in energy: a short branch.
+BRANCH_JOB = {
+    "system": {**BALL, "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}},
+    "initial_state": {"M": [-3.436852983, -0.7015446800, 0.0], "gamma": [-0.2, 0.9797958971, 0.0]},
+    "project_initial_state": True, "t_final": 20.0, "samples": 11,
+    "periodic_orbit": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
+                       "branch": {"in": "energy", "to": 2.3, "max_points": 6}},
 }
 
 
@@ -72,19 +80,22 @@ def _expected_size(fig) -> tuple[int, int]:
 
 @pytest.mark.parametrize("name", plots.JOB_PLOTS)
 def test_every_job_plot_renders_png_of_its_size_and_svg_with_labels(ball, name):
-    result, request = ball
+    result, request = (run_job(BRANCH_JOB), BRANCH_JOB) if name == "bifurcation" else ball
     png = job_plot(name, result, request, "png")
     figures = {**plots._JOB_FIGURES, "periodic_orbit": plot_periodic.periodic_orbit_figure,
+               "bifurcation": plot_branch.bifurcation_figure,
                "trajectory": plot_trajectory.trajectory_figure}
     assert _png_size(png) == _expected_size(figures[name](result, request))
     texts = _svg_texts(job_plot(name, result, request, "svg"))
-    assert "t [s]" in texts or name in ("poincare", "periodic_orbit")  # time axis with its unit
+    assert "t [s]" in texts or name in ("poincare", "periodic_orbit", "bifurcation")  # time axis with its unit
     assert "Chaplygin's ball" in texts and "chaplygin_ball" in texts  # the title names the system
     expected = {"trajectory": ["γ₁ [1]", "γ₃ [1]", "M [kg m^2/s]", "eq. 2604-1", "|gamma| = 1"],
                 "integrals": ["H = (M, omega)/2 + U(gamma)", "c = (M, gamma)", "verdict tolerance 1e-10"],
                 "poincare": ["γ₁ [1]", "M₃ [kg m^2/s]", "gamma3 = 0", "increasing"],
                 "lyapunov": ["λ₁ = ", "1/s", "[1/s]"],
-                "periodic_orbit": ["Re μ", "Im μ", "unit circle", "period-1 orbit", "gamma3 = 0"]}[name]
+                "periodic_orbit": ["Re μ", "Im μ", "unit circle", "period-1 orbit", "gamma3 = 0"],
+                "bifurcation": ["energy [J]", "γ₁ [1] of x0 on the section", "period 1, stable",
+                                "trace of the section map", "branch of the period-1 orbit in energy"]}[name]
     for label in expected:
         assert label in texts, (label, texts)
 

@@ -58,6 +58,9 @@ SEMANTIC_422 = {
     "explore-plane": "the section's components and level must be the system's, and fix finitely many states",
     "explore-orbit": "as explore-plane, and the point must lie inside the level (a state crosses there)",
     "explore-periodic-orbit": "as explore-orbit",
+    "jobs-plot": "the trajectory's window (t_from, t_to) must lie within the job's own run, 0 <= t_from < t_to <= "
+                 "t_final",
+    "jobs-page": "as jobs-plot",
 }
 #: The largest work limits of a fuzzed symbolic request (the schema allows up to 10x the defaults; a tenth
 #: of them keeps every case within seconds, and the safety cap's 503 out of the fuzz).

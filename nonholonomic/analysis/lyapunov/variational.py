@@ -32,12 +32,14 @@ FRAME_SEED = 1980
 
 
 @lru_cache(maxsize=16)
-def variational_equations(system: MechanicalSystem) -> tuple[tuple[hy.expression, hy.expression], ...]:
+def variational_equations(system: MechanicalSystem,
+                          pars: tuple[int, ...] = ()) -> tuple[tuple[hy.expression, hy.expression], ...]:
     """The heyoka equations of the tangent flow of ``system``: x, then Φ, then s = ∫ div f dt.
 
-    Φ is ``hy.var_ode_sys(state_equations, hy.var_args.vars, order=1)``'s matrix ∂x_i/∂x_j(t₀),
-    stored row-major after the n state variables (entry ``n + i n + j``); the layout is checked
-    against heyoka's names for the partials.
+    Φ is ``hy.var_ode_sys(state_equations, args, order=1)``'s matrix of ∂x_i/∂(x_j(t₀)) and, with ``pars``,
+    ∂x_i/∂p_k for the runtime parameters ``pars`` (their sensitivities, for a branch's continuation in a
+    parameter), stored row-major after the n state variables (entry ``n + i (n + len(pars)) + j``); the layout
+    is checked against heyoka's names for the partials.
 
     Raises
     ------
@@ -46,27 +48,40 @@ def variational_equations(system: MechanicalSystem) -> tuple[tuple[hy.expression
     """
     ts = taylor_system(system)
     n = ts.n_state
-    vs = hy.var_ode_sys(ts.state_equations, hy.var_args.vars, order=1)
+    args = hy.var_args.vars if not pars else list(ts.variables[:n]) + [hy.par[k] for k in pars]
+    vs = hy.var_ode_sys(ts.state_equations, args, order=1)
     eqs = list(vs.sys)
-    names = [str(v) for v in ts.variables[:n]]
-    for i in range(n):
-        for j in range(n):
-            lhs = str(eqs[n + i * n + j][0])
-            if lhs != f"∂[({j}, 1)]{names[i]}":
-                raise RuntimeError(f"unexpected heyoka variational layout: entry {n + i * n + j} is {lhs}")
+    check_partials(eqs, [str(v) for v in ts.variables[:n]], n + len(pars))
     divergence = hy.sum([hy.diff(rhs, var) for var, rhs in ts.state_equations])
     s = hy.make_vars("lyapunov_div_f")
     return tuple(eqs) + ((s, divergence),)
 
 
+def check_partials(eqs: list[tuple[hy.expression, hy.expression]], names: list[str], width: int) -> None:
+    """Check heyoka's row-major layout of first-order partials: entry ``n + i width + j`` is ∂x_i/∂(argument j)
+    for the n state ``names`` and ``width`` arguments of ``hy.var_ode_sys``.
+
+    Raises
+    ------
+    RuntimeError
+        If an entry is not where the layout puts it.
+    """
+    n = len(names)
+    for i in range(n):
+        for j in range(width):
+            lhs = str(eqs[n + i * width + j][0])
+            if lhs != f"∂[({j}, 1)]{names[i]}":
+                raise RuntimeError(f"unexpected heyoka variational layout: entry {n + i * width + j} is {lhs}")
+
+
 @lru_cache(maxsize=16)
-def variational_template(system: MechanicalSystem, tolerance: float) -> hy.taylor_adaptive:
-    """Compile the tangent-flow integrator at ``tolerance``, once per process.
+def variational_template(system: MechanicalSystem, tolerance: float, pars: tuple[int, ...] = ()) -> hy.taylor_adaptive:
+    """Compile the tangent-flow integrator at ``tolerance`` (with the sensitivities to ``pars``), once per process.
 
     Compact mode: Chaplygin's ball in a linear field (43 variables) compiles in about a second;
     without it, in about two minutes, for a propagation only ~1.6× faster.
     """
-    eqs = list(variational_equations(system))
+    eqs = list(variational_equations(system, pars))
     return hy.taylor_adaptive(eqs, np.zeros(len(eqs)), tol=tolerance, compact_mode=True)
 
 
@@ -96,10 +111,12 @@ def thread_copy(key: tuple[object, ...], template: Callable[[], T]) -> T:
     return cast(T, cache[key])  # what template() gave under this key
 
 
-def _integrator(system: MechanicalSystem, tolerance: float, lanes: int = 0) -> hy.taylor_adaptive:
-    """This thread's own copy of the compiled integrator (``lanes`` 0: scalar)."""
-    return thread_copy(("tangent", system, tolerance, lanes),
-                       lambda: variational_template(system, tolerance) if lanes == 0
+def _integrator(system: MechanicalSystem, tolerance: float, lanes: int = 0,
+                pars: tuple[int, ...] = ()) -> hy.taylor_adaptive:
+    """This thread's own copy of the compiled integrator (``lanes`` 0: scalar, with the sensitivities to
+    ``pars``)."""
+    return thread_copy(("tangent", system, tolerance, lanes, pars),
+                       lambda: variational_template(system, tolerance, pars) if lanes == 0
                        else variational_batch_template(system, tolerance, lanes))
 
 

@@ -280,31 +280,16 @@ def _verified(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, t: float, 
               level_map: dict[str, float], tolerance: float, coordinates: Sequence[str] | None, start: float,
               common: _SearchStats) -> PeriodicOrbit:
     """The closed orbit's multipliers, family, crossings and independent closing error."""
-    n = system.dimension
     _, J, fl = closing.evaluate(np.append(x, t))
     warnings: list[str] = []
-    size = max(1.0, float(np.linalg.norm(fl.monodromy, 2)))
     # the family: rank of the closing equations' Jacobian
     u, sv, vt = np.linalg.svd(J)
     ratio = float(sv[-1] / sv[0])
     family = int(np.sum(sv / sv[0] < DEGENERATE_BELOW))
-    # the multipliers
-    mu = np.linalg.eigvals(fl.monodromy)
-    grads = integral_gradients(system)(x[None, :], p)[0].reshape(-1, n)
-    norms = np.linalg.norm(grads, axis=1)
-    grads = grads[norms > 0] / norms[norms > 0, None]
-    rank = int(np.linalg.matrix_rank(grads, tol=1e-8)) if len(grads) else 0
-    trivial = min(1 + rank, n)
-    order = np.argsort(np.abs(mu - 1.0), kind="stable")
-    trivial_mu, section_mu = mu[order[:trivial]], mu[order[trivial:]]
-    trivial_dev = float(np.max(np.abs(trivial_mu - 1.0)))
-    trivial_tol = max(1e-6, 100.0 * float(np.sqrt(MACHINE_EPSILON * size)))
-    section_mu = section_mu[np.argsort(-np.abs(section_mu), kind="stable")]
-    trace, stability = _stability(section_mu, trivial_tol)
-    checks = [OrbitCheck("trivial_multipliers", trivial_dev <= trivial_tol, trivial_dev, 0.0, trivial_tol,
-                         f"{trivial} multipliers of the monodromy are 1 (the flow's direction and {rank} independent "
-                         f"integrals or constraints); the largest |mu - 1| among them")]
-    checks.append(_product_check(system, p, x, fl, mu, size))
+    ms = split_multipliers(system, p, x, fl)
+    mu, trivial, section_mu, size = ms.all, ms.trivial_count, ms.section, ms.size
+    trace, stability = stability_of(section_mu, ms.trivial_tolerance)
+    checks = [ms.trivial_check, product_check(system, p, x, fl, mu, size)]
     # the crossings in (0, T]
     sec = section(system, p, x, t * (1 + 1e-7) + 1e-12, surface, value=value, direction=direction,
                   max_points=period + 2, coordinates=coordinates, tolerance=tolerance)
@@ -351,7 +336,41 @@ def _verified(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, t: float, 
         wall_time_s=time.perf_counter() - start, warnings=tuple(warnings), **common)
 
 
-def _stability(section_mu: np.ndarray, at_one: float) -> tuple[float | None, str | None]:
+@dataclass(frozen=True)
+class Multipliers:
+    """The monodromy's multipliers split into the trivial ones (1: the flow and each independent integral or
+    constraint) and the section map's (largest modulus first); ``size`` = max(1, ‖Φ‖₂)."""
+
+    all: np.ndarray
+    trivial_count: int
+    section: np.ndarray
+    trivial_check: OrbitCheck
+    trivial_tolerance: float
+    size: float
+
+
+def split_multipliers(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, fl: Flow) -> Multipliers:
+    """The multipliers of Φ(T) at the orbit through ``x``, split, with the trivial ones' check."""
+    n = system.dimension
+    size = max(1.0, float(np.linalg.norm(fl.monodromy, 2)))
+    mu = np.linalg.eigvals(fl.monodromy)
+    grads = integral_gradients(system)(x[None, :], p)[0].reshape(-1, n)
+    norms = np.linalg.norm(grads, axis=1)
+    grads = grads[norms > 0] / norms[norms > 0, None]
+    rank = int(np.linalg.matrix_rank(grads, tol=1e-8)) if len(grads) else 0
+    trivial = min(1 + rank, n)
+    order = np.argsort(np.abs(mu - 1.0), kind="stable")
+    trivial_mu, section_mu = mu[order[:trivial]], mu[order[trivial:]]
+    trivial_dev = float(np.max(np.abs(trivial_mu - 1.0)))
+    trivial_tol = max(1e-6, 100.0 * float(np.sqrt(MACHINE_EPSILON * size)))
+    section_mu = section_mu[np.argsort(-np.abs(section_mu), kind="stable")]
+    check = OrbitCheck("trivial_multipliers", trivial_dev <= trivial_tol, trivial_dev, 0.0, trivial_tol,
+                       f"{trivial} multipliers of the monodromy are 1 (the flow's direction and {rank} independent "
+                       f"integrals or constraints); the largest |mu - 1| among them")
+    return Multipliers(mu, trivial, section_mu, check, trivial_tol, size)
+
+
+def stability_of(section_mu: np.ndarray, at_one: float) -> tuple[float | None, str | None]:
     """The section map's trace and the orbit's linear stability from its multipliers (within ``at_one`` of 1
     all: parabolic, as on a family of orbits)."""
     if len(section_mu) == 0:
@@ -371,7 +390,7 @@ def _stability(section_mu: np.ndarray, at_one: float) -> tuple[float | None, str
     return trace, "unstable"
 
 
-def _product_check(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, fl: Flow, mu: np.ndarray,
+def product_check(system: MechanicalSystem, p: np.ndarray, x: np.ndarray, fl: Flow, mu: np.ndarray,
                    size: float) -> OrbitCheck:
     """det Φ(T) = Π μ against ρ(x₀)/ρ(x(T)) of the claimed measure (Liouville)."""
     product = float(np.prod(mu).real)

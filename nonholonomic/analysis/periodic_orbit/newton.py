@@ -92,16 +92,21 @@ def integral_gradients(system: MechanicalSystem) -> VectorKernel:
 
 @dataclass(frozen=True)
 class Flow:
-    """x(T; x₀), the monodromy Φ(T) and ∫₀ᵀ div f dt, with the Taylor steps taken."""
+    """x(T; x₀), the monodromy Φ(T) and ∫₀ᵀ div f dt, with the Taylor steps taken; ``dx_dlambda``: ∂x(T)/∂λ
+    for a continued parameter λ (None without one)."""
 
     state: np.ndarray
     monodromy: np.ndarray
     divergence_integral: float
     steps: int
+    dx_dlambda: np.ndarray | None = None
 
 
-def flow(system: MechanicalSystem, p: np.ndarray, x0: np.ndarray, t: float, tolerance: float) -> Flow:
-    """Integrate the state and its variational equations from ``x0`` over [0, ``t``] (heyoka, compact mode).
+def flow(system: MechanicalSystem, p: np.ndarray, x0: np.ndarray, t: float, tolerance: float,
+         pars: tuple[int, ...] = (), dpars: np.ndarray | None = None) -> Flow:
+    """Integrate the state and its variational equations from ``x0`` over [0, ``t``] (heyoka, compact mode);
+    with ``pars``, also the sensitivities to those runtime parameters, combined as ∂x(T)/∂λ = Σ_k ∂x(T)/∂p_k
+    · ``dpars[k]``.
 
     Raises
     ------
@@ -110,19 +115,23 @@ def flow(system: MechanicalSystem, p: np.ndarray, x0: np.ndarray, t: float, tole
     """
     if not (np.isfinite(t) and t > 0):
         raise IntegrationError(f"the period must be positive and finite, got T = {t!r}")
-    n = system.dimension
+    n, k = system.dimension, len(pars)
     ts = taylor_system(system)
-    ta = _integrator(system, tolerance)
+    ta = _integrator(system, tolerance, pars=pars)
     ta.time = 0.0
     ta.pars[:] = ts.runtime_parameters(p)[: len(ta.pars)]
     state = ta.state
     state[:n] = x0
-    state[n: n + n * n] = np.eye(n).reshape(-1)
+    block = np.zeros((n, n + k))
+    block[:, :n] = np.eye(n)
+    state[n: n + n * (n + k)] = block.reshape(-1)
     state[-1] = 0.0
     outcome, _, _, steps, _, _ = ta.propagate_until(float(t), max_steps=2_000_000)
     if outcome != hy.taylor_outcome.time_limit or not np.all(np.isfinite(state)):
         raise IntegrationError(f"heyoka stopped at t = {ta.time:g} of {t:g} with outcome {outcome.name}")
-    return Flow(state[:n].copy(), state[n: n + n * n].reshape(n, n).copy(), float(state[-1]), int(steps))
+    partials = state[n: n + n * (n + k)].reshape(n, n + k)
+    dx_dlambda = None if not k or dpars is None else partials[:, n:] @ dpars
+    return Flow(state[:n].copy(), partials[:, :n].copy(), float(state[-1]), int(steps), dx_dlambda)
 
 
 class CancelCheck:
@@ -161,21 +170,28 @@ class Closing:
         x0, t = z[:n], float(z[n])
         self.cancel.tick()
         fl = flow(self.system, self.p, x0, t, self.tolerance)
+        R, J, _ = self.assemble(x0, self.p, self.targets, fl, 0)
+        self._last = (key, R, J, fl)
+        return R, J, fl
+
+    def assemble(self, x0: np.ndarray, p: np.ndarray, targets: np.ndarray, fl: Flow,
+                 extra: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """R and J (with ``extra`` zero columns after T, scaled by 1/scale) from a flow; the rows' gradient norms
+        (each algebraic row is divided by its own)."""
+        n = self.system.dimension
         self.evaluations += 1
         self.steps += fl.steps
-        values = self.rows.values(x0[None, :], self.p)[0]
-        grads = self.rows.gradients(x0[None, :], self.p)[0].reshape(len(values), n)
+        values = self.rows.values(x0[None, :], p)[0]
+        grads = self.rows.gradients(x0[None, :], p)[0].reshape(len(values), n)
         norms = np.maximum(np.linalg.norm(grads, axis=1), 1e-300)
-        f_t = numeric(self.system).rhs_single(fl.state, self.p)
-        R = np.concatenate([(fl.state - x0), (values - self.targets) / norms]) / self.scale
-        J = np.zeros((n + len(values), n + 1))
+        f_t = numeric(self.system).rhs_single(fl.state, p)
+        R = np.concatenate([(fl.state - x0), (values - targets) / norms]) / self.scale
+        J = np.zeros((n + len(values), n + 1 + extra))
         J[:n, :n] = fl.monodromy - np.eye(n)
         J[:n, n] = f_t
         J[n:, :n] = grads / norms[:, None]
-        J[:n] /= self.scale
-        J[n:] /= self.scale
-        self._last = (key, R, J, fl)
-        return R, J, fl
+        J /= self.scale
+        return R, J, norms
 
     def residual(self, z: np.ndarray) -> float:
         try:
