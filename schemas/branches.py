@@ -31,8 +31,9 @@ class OrbitBranchRequest(BaseModel):
 
     continued: str = Field(alias="in", max_length=100,
                            description="'energy' (the family at fixed parameters: the level's other integrals "
-                                       "held at the seed's values) or a parameter path as in sweeps "
-                                       "('D', 'potential.a[2]': the whole level held)")
+                                       "held at the seed's values), another of the system's integrals by name "
+                                       "('area'), or a parameter path as in sweeps ('D', 'potential.a[2]': the "
+                                       "whole level held)")
     to: FiniteFloat = Field(description="the branch ends where the continued value reaches this (or after "
                                         "max_points, or when it returns to the start's value after a fold)")
     max_points: int = Field(100, ge=2, le=MAX_BRANCH_POINTS, description="most points of the branch")
@@ -56,17 +57,13 @@ class OrbitBranchRequest(BaseModel):
         if not self.min_step <= self.step <= self.max_step:
             found.append(FieldProblem(f"{prefix}.step", f"needs min_step <= step <= max_step, got {self.min_step:g}, "
                                                         f"{self.step:g}, {self.max_step:g}"))
-        if self.continued == "energy":
-            names = [i.name for i in system.integrals]
-            if "energy" not in names:
-                found.append(FieldProblem(f"{prefix}.in", f"{system.kind} has no integral named energy (its "
-                                                          f"integrals: {', '.join(names) or 'none'}); continue a "
-                                                          "parameter instead"))
+        if self.continued in [i.name for i in system.integrals]:
             return found
         try:
             self.parameter_index(system, parameters)
         except ValueError as exc:
-            found.append(FieldProblem(f"{prefix}.in", str(exc)))
+            integrals = ", ".join(i.name for i in system.integrals) or "none"
+            found.append(FieldProblem(f"{prefix}.in", f"{exc}; or one of its integrals: {integrals}"))
             return found
         group, index = sweep_target(system, self.continued)
         try:
@@ -93,7 +90,8 @@ class OrbitBranchRequest(BaseModel):
         return int(changed[0])
 
     def options(self, system: MechanicalSystem, parameters: dict[str, Any]) -> BranchOptions:
-        index = None if self.continued == "energy" else self.parameter_index(system, parameters)
+        integral = self.continued in [i.name for i in system.integrals]
+        index = None if integral else self.parameter_index(system, parameters)
         return BranchOptions(self.continued, float(self.to), index, self.max_points, self.step, self.min_step,
                              self.max_step, self.switch, self.switch_points, self.check_every,
                              self.max_multiplier)
@@ -106,7 +104,7 @@ def _nudged(parameters: dict[str, Any], name: str, index: int | None) -> float:
 
 
 class BranchPointItem(BaseModel):
-    value: float = Field(description="the continued value: the energy or the parameter")
+    value: float = Field(description="the continued value: the energy (another integral) or the parameter")
     arclength: float = Field(description="along the branch from its start, in (x0, T, value) scaled")
     period_t: float = Field(description="T [s]")
     period_tau: float | None = Field(description="the reduced time over one period (null without one)")
@@ -178,9 +176,10 @@ def point_to_json(system: MechanicalSystem, bp: BranchPoint) -> dict[str, Any]:
 def orbit_branch_to_json(system: MechanicalSystem, branch: OrbitBranch) -> dict[str, Any]:
     """An :class:`~nonholonomic.analysis.periodic_orbit.branch.OrbitBranch` as JSON."""
     reduced = system.reduced_time
+    value_unit: str | None = None
     if branch.continued == "energy":
         value_unit = "J"
-    else:
+    elif branch.continued not in [i.name for i in system.integrals]:
         group, _ = sweep_target(system, branch.continued)
         value_unit = group.unit
     return {
@@ -196,6 +195,6 @@ def orbit_branch_to_json(system: MechanicalSystem, branch: OrbitBranch) -> dict[
         "switched": [orbit_branch_to_json(system, s) for s in branch.switched],
         "evaluations": branch.evaluations, "taylor_steps": branch.taylor_steps, "wall_time_s": branch.wall_time_s,
         "warnings": list(branch.warnings),
-        "units": {"value": value_unit, "period_t": "s", "arclength": "1 (x0, T and value, scaled)",
-                  **({"period_tau": reduced.unit} if reduced else {})},
+        "units": {**({"value": value_unit} if value_unit else {}), "period_t": "s",
+                  "arclength": "1 (x0, T and value, scaled)", **({"period_tau": reduced.unit} if reduced else {})},
     }

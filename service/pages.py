@@ -43,6 +43,8 @@ ENSEMBLE_PLOT_CAPTIONS = {
                  "near it at T, and still move (\"not converged\") however long the run",
     "map": "the chaos map: each indicator on the section plane, one cell per pixel (grey: outside the level, red: "
            "failed); the colour bar marks the threshold above which a cell is chaotic",
+    "orbit_diagram": "the orbit diagram: every member's section points against the swept parameter (a periodic "
+                     "orbit of period k: k points above its value; a torus: a segment; chaos: a smear)",
 }
 #: How to cite, on every page; the same data as ``CITATION.cff`` at the repository's root (a test compares them).
 CITATION: dict[str, dict[str, Any]] = {
@@ -136,7 +138,9 @@ def ensemble_plots(view: dict[str, Any]) -> list[tuple[str, str, str | None]]:
     from the finished chunks' members; before one chunk finished with a member that succeeded, the page
     shows the reason in its place, not an image that would answer 409."""
     wanted = {"poincare": bool(view["request"].get("poincare")), "exponents": bool(view["request"].get("lyapunov")),
-              "map": bool(view["request"].get("indicators"))}
+              "map": bool(view["request"].get("indicators")),
+              "orbit_diagram": bool(view["request"].get("poincare"))
+              and bool((view["request"].get("members") or {}).get("sweep"))}
     if not view["chunks"]["done"]:
         pending: str | None = ("no chunk of members is done" +
                                (" (this page reloads every 2 s)" if view["status"] in ("queued", "running") else ""))

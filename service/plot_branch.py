@@ -85,19 +85,21 @@ def bifurcation_figure(result: Mapping[str, Any], request: Mapping[str, Any] | N
                     continue
                 ax.plot([bif["value"]], [y], MARKERS.get(bif["kind"], "o"), color="k", markersize=6,
                         markerfacecolor="white" if not bif.get("located") else "k", zorder=5)
-                ax.annotate(f"{label} {bif['value']:.6g}", (bif["value"], y), textcoords="offset points",
-                            xytext=(5, 6 if i % 2 == 0 else -13), fontsize=8)
+                if ax is left:  # the right panel's markers are at the same values
+                    ax.annotate(f"{label} {bif['value']:.6g}", (bif["value"], y), textcoords="offset points",
+                                xytext=(7, -12) if i % 2 == 0 else (-7, 5), ha="left" if i % 2 == 0 else "right",
+                                fontsize=8)
     value_label = f"{branch['in']} [{value_unit}]" if value_unit else str(branch["in"])
     left.set_xlabel(value_label)
     left.set_ylabel(_axis_label(coordinate, units) + " of x0 on the section")
-    left.set_title("bifurcation diagram: solid stable (elliptic), dashed unstable; F fold, PD period doubling, "
-                   "R3/R4 resonances", fontsize=9)
+    left.set_title("solid: stable (elliptic), dashed: unstable; F fold, PD period doubling, R3/R4 resonances",
+                   fontsize=9)
     left.legend(loc="best", fontsize=8)
     left.grid(alpha=0.3)
     right.set_yscale("symlog", linthresh=10)
     right.set_xlabel(value_label)
     right.set_ylabel("trace of the section map")
-    right.set_title("a multiplier through +1 at trace 2 (fold, tangent), through -1 at trace -2 (period doubling)",
+    right.set_title("trace 2: a multiplier +1 (fold, tangent); trace -2: a multiplier -1 (period doubling)",
                     fontsize=9)
     right.legend(loc="best", fontsize=8)
     right.grid(alpha=0.3)

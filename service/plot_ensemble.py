@@ -154,6 +154,12 @@ def _ensemble_exponents_figure(view: Mapping[str, Any], members: Iterable[Mappin
     return fig
 
 
+def _orbit_diagram(view: Mapping[str, Any], members: Iterable[Mapping[str, Any]]) -> Figure:
+    from service.orbit_diagram import orbit_diagram_figure  # its own module, which imports this one
+
+    return orbit_diagram_figure(view, members)
+
+
 ENSEMBLE_FIGURES: dict[str, Callable[[Mapping[str, Any], Iterable[Mapping[str, Any]]], Figure]] = {
-    "poincare": _ensemble_poincare_figure, "exponents": _ensemble_exponents_figure,
+    "poincare": _ensemble_poincare_figure, "exponents": _ensemble_exponents_figure, "orbit_diagram": _orbit_diagram,
 }

@@ -50,7 +50,7 @@ if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType
 
 JOB_PLOTS: tuple[str, ...] = ("trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit", "bifurcation")
-ENSEMBLE_PLOTS: tuple[str, ...] = ("poincare", "exponents", "map")
+ENSEMBLE_PLOTS: tuple[str, ...] = ("poincare", "exponents", "map", "orbit_diagram")
 FORMATS = {"png": "image/png", "svg": "image/svg+xml"}
 
 #: Resolution of PNG output.
@@ -143,7 +143,8 @@ def ensemble_plot(name: str, view: dict, members: Iterable[dict], fmt: str) -> b
     ----------
     name : one of :data:`ENSEMBLE_PLOTS`: ``poincare`` (every member's section points, one colour
         per member), ``exponents`` (the largest exponent against the swept parameter, or their
-        histogram) or ``map`` (a chaos map: one panel per indicator).
+        histogram), ``map`` (a chaos map: one panel per indicator) or ``orbit_diagram`` (a sweep's section
+        points against the swept parameter).
     view : the ensemble's view (``GET /v1/ensembles/{id}``; its ``request`` names the system).
     members : the member results (``GET /v1/ensembles/{id}/members`` items), consumed once.
     fmt : ``png`` or ``svg``.

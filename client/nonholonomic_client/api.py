@@ -561,6 +561,25 @@ class Client(OrbitRoutes, SymbolicRoutes):
                             "detail": f"job {ident} asked for no Lyapunov spectrum (request.lyapunov)"})
         return lyapunov if format == "json" else frames.exponents_frame(lyapunov)
 
+    def plot(self, ident: str, name: str, fmt: Literal["png", "svg"] = "png", *,  # noqa: A002
+             of: Literal["job", "ensemble"] | None = None) -> bytes:
+        """``GET /v1/jobs/{id}/plots/{name}.{fmt}`` (or an ensemble's): a plot the server draws, as bytes
+        (``IPython.display.Image(api.plot(job, "bifurcation"))`` shows it in a notebook).
+
+        Parameters
+        ----------
+        ident : str
+            A job's or an ensemble's id (or its first characters).
+        name : str
+            A job's ``trajectory``, ``integrals``, ``poincare``, ``lyapunov``, ``periodic_orbit``,
+            ``bifurcation``; an ensemble's ``poincare``, ``exponents``, ``map``.
+        fmt : {"png", "svg"}
+        of : {"job", "ensemble"}, optional
+            Which ``ident`` is (default: a job if one has that id).
+        """
+        kind = "ensembles" if self._is_ensemble(ident, of) else "jobs"
+        return self._request("GET", f"/v1/{kind}/{ident}/plots/{name}.{fmt}").content
+
     def convergence(self, job_id: str) -> pandas.DataFrame:
         """How a job's finite-time Lyapunov estimates moved: a DataFrame indexed by ``t``, a column
         ``exponent_k`` each.

@@ -89,5 +89,36 @@ class OrbitRoutes(BaseClient):
                                                  *(x for s in data.get("switched", []) for x in s["bifurcations"])]]
         return frame
 
+    def orbit_diagram(self, ensemble_id: str, format: Literal["pandas", "json", "csv"] = "pandas",  # noqa: A002
+                      out: str | Path | None = None) -> dict[str, Any] | pandas.DataFrame | bytes | Path:
+        """``GET /v1/ensembles/{id}/orbit-diagram``: a sweep's section points against the swept value.
+
+        Parameters
+        ----------
+        ensemble_id : str
+            A sweep ensemble's id (or its first characters) that asked for a ``poincare`` section.
+        format : {"pandas", "json", "csv"}, default "pandas"
+            ``pandas``: one row per crossing, ``member``, the swept value named after its parameter with its
+            unit, ``crossing``, the section's two coordinates. ``json``: one array per column. ``csv``: the
+            file's bytes, or streamed into ``out``.
+        out : str or Path, optional
+            Where to write the ``csv``.
+
+        Raises
+        ------
+        ApiError
+            409 if the ensemble is not a sweep with a section.
+        """
+        path = f"/v1/ensembles/{ensemble_id}/orbit-diagram"
+        if format == "json":
+            return dict(self._json("GET", path, params={"format": "json"}))
+        if format == "csv":
+            if out is not None:
+                return self._download(path, {"format": "csv"}, out)
+            return self._request("GET", path, params={"format": "csv"}).content
+        if format != "pandas":
+            raise ValueError(f"format must be one of pandas, json, csv, not {format!r}")
+        return frames._pandas().read_csv(io.StringIO(self._request("GET", path, params={"format": "csv"}).text))
+
     def _result_of(self, job_id: str) -> dict[str, Any]:
         return self._succeeded(self._json("GET", f"/v1/jobs/{job_id}", params={"trajectory": "false"}), job_id)

@@ -28,6 +28,7 @@ from service.ensembles import (
     members_page,
     request_units,
     section_csv,
+    section_members,
     section_netcdf,
     section_npz,
     view,
@@ -39,7 +40,7 @@ from service.errors import (
     invalid_request,
     problem_responses,
 )
-from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses, vector_components
+from service.exports import MEDIA_TYPES, SUFFIXES, download, download_responses, json_download, vector_components
 from service.idempotency import IDEMPOTENCY_IN_PROGRESS, IDEMPOTENCY_MISMATCH, QUEUE_BOUNDS, idempotent
 from service.members_table import members_csv, members_netcdf
 from service.openapi import operation_id
@@ -171,6 +172,34 @@ def get_section(ensemble_id: str, request: Request, backend: Backend, owner: Own
     if format == "npz":
         return download(request, section_npz(store, ensemble_id, record), MEDIA_TYPES[format], filename)
     return download(request, section_netcdf(store, ensemble_id, record), MEDIA_TYPES[format], filename)
+
+
+@router.get("/{ensemble_id}/orbit-diagram", operation_id="ensembles-orbit-diagram", response_class=Response,
+            responses={**download_responses([MEDIA_TYPES["csv"], "application/json"],
+                                            "the orbit diagram: CSV (format=csv) or JSON (format=json)"),
+                       **_ERRORS, **problem_responses({409: "the ensemble is not a sweep with a poincare section",
+                                                       422: "unknown format"})},
+            summary="A sweep's orbit diagram: every member's section points against the swept value (CSV or JSON)")
+def get_orbit_diagram(ensemble_id: str, request: Request, backend: Backend, owner: Owner,
+                      format: Literal["csv", "json"] = Query(  # noqa: A002
+                          "csv", description="csv (one row per crossing: member, the swept value with its unit, "
+                                             "crossing, the section's two coordinates) or json (one array per "
+                                             "column)")) -> Response:
+    """The members done so far, in index order, each member's crossings in time order."""
+    from service.orbit_diagram import NoOrbitDiagram, diagram_csv, diagram_json, sweep_of
+
+    record = ensemble_of(backend, owner, ensemble_id)
+    ensemble_id = record["id"]
+    try:
+        sweep_of(record["request"])
+    except NoOrbitDiagram as exc:
+        raise ProblemError(409, "No orbit diagram", str(exc), CONFLICT) from None
+    units = request_units(record["request"])
+    members = section_members(backend.ensembles, ensemble_id, record)
+    filename = f"ensemble-{ensemble_id}-orbit-diagram.{'csv' if format == 'csv' else 'json'}"
+    if format == "csv":
+        return download(request, diagram_csv(record["request"], members, units), MEDIA_TYPES["csv"], filename)
+    return json_download(request, diagram_json(record["request"], members, units), filename)
 
 
 @router.get("/{ensemble_id}/map", operation_id="ensembles-map", response_class=Response,

@@ -31,7 +31,7 @@ PAGE_MEMBERS = 50
 #: Rendered plots kept in memory (finished jobs and ensembles only).
 PLOT_CACHE_SIZE = 64
 JobPlotName = Literal["trajectory", "integrals", "poincare", "lyapunov", "periodic_orbit", "bifurcation"]
-EnsemblePlotName = Literal["poincare", "exponents", "map"]
+EnsemblePlotName = Literal["poincare", "exponents", "map", "orbit_diagram"]
 PlotFormat = Literal["png", "svg"]
 _HTML = media_responses(["text/html"], "the page")
 _IMAGE = download_responses(["image/png", "image/svg+xml"], "the plot (PNG or SVG, as the path's suffix says)")

@@ -286,6 +286,31 @@ def test_a_chaos_maps_page_shows_the_map_its_summary_and_its_exports(api, browse
     visit.finish("chaos-map", api)
 
 
+def test_a_branch_page_shows_its_bifurcation_diagram_and_table(api, browser):
+    """Issue 36: the island's centre continued in a3 through its period doubling, the period-2 branch followed."""
+    body = {"system": {**BALL, "potential": {"kind": "linear", "a": [0.3, -0.2, 0.5]}},
+            "initial_state": {"M": [-3.436852983, -0.70154468, 0.0], "gamma": [-0.2, 0.9797958971, 0.0]},
+            "project_initial_state": True, "t_final": 20.0, "samples": 11,
+            "periodic_orbit": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
+                               "branch": {"in": "potential.a[2]", "to": 1.2, "switch_points": 12}}}
+    location = _submit(api, "/v1/jobs", body)
+    job = _wait_ensemble(api, location)
+    assert job["status"] == "succeeded", job
+    visit = Visit(browser, f"{api}{location}/page")
+    page = visit.page
+    images = dict(visit.images_loaded())
+    diagram = [src for src in images if "bifurcation" in src]
+    assert diagram and images[diagram[0]] > 1000, images  # the full-width figure, drawn
+    rows = page.locator("#bifurcations tr")
+    assert rows.count() == 1 + 1 + len(job["result"]["periodic_orbit"]["branch"]["switched"][0]["bifurcations"])
+    assert "period doubling" in rows.nth(1).inner_text()
+    assert page.locator("#branch-points tr").count() == 1 + len(job["result"]["periodic_orbit"]["branch"]["points"])
+    links = page.eval_on_selector_all("#branch ~ p a", "els => els.map(e => e.getAttribute('href'))")
+    assert f"{location}/branch?format=csv" in links and f"{location}/branch?format=netcdf" in links
+    page.locator("#bifurcations").scroll_into_view_if_needed()
+    visit.finish("job-branch", api)
+
+
 def test_report_page_shows_every_claim_with_its_verdict(api, browser):
     location = _submit(api, "/v1/paper/report", {"claims": REPORT_CLAIMS})
     with httpx.Client(base_url=api, timeout=30) as client:

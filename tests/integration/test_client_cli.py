@@ -283,14 +283,15 @@ def test_a_sweeps_and_a_maps_members_table_carries_what_varies(api):
     assert cells["gamma1"].nunique() == 2 and cells["M3"].nunique() == 3  # two rows of cells, three columns
 
 
-def test_a_periodic_orbit_and_its_continuation_as_a_table(api, ball_job):
+def test_a_periodic_orbit_and_its_continuation_as_a_table(base, api, ball_job, tmp_path):
     """Issue 35, item 4: the branch through its period doubling, one row per value, flagged where it happened."""
     from tests.api.test_periodic_orbits_api import LINEAR, SEED
 
     job_id = api.submit({"system": LINEAR, "initial_state": SEED, "t_final": 50.0, "samples": 11,
                          "project_initial_state": True,
                          "periodic_orbit": {"surface": "gamma3", "coordinates": ["gamma1", "M3"],
-                                            "sweep": {"parameter": "potential.a[2]", "values": [0.7, 0.8, 0.9, 1.0]}}})
+                                            "sweep": {"parameter": "potential.a[2]", "values": [0.7, 0.8, 0.9, 1.0]},
+                                            "branch": {"in": "potential.a[2]", "to": 0.9, "switch_points": 3}}})
     api.wait(job_id, timeout=300)
     branch = api.periodic_orbit(job_id)
     assert branch.index.name == "potential.a[2]" and branch.index.tolist() == [0.7, 0.8, 0.9, 1.0]
@@ -304,6 +305,24 @@ def test_a_periodic_orbit_and_its_continuation_as_a_table(api, ball_job):
     with pytest.raises(ApiError) as caught:
         api.periodic_orbit(ball_job[0])
     assert "asked for no periodic orbit" in caught.value.detail
+    # issue 36: the same job's branch (pseudo-arclength) as the server's table, its bifurcation where the sweep saw it
+    table = api.branch(job_id)
+    value = "potential.a[2] [kg m^2/s^2]"
+    [doubling] = table[table.kind == "period_doubling"][value].tolist()
+    assert 0.8 < doubling < 0.9 and table.attrs["status"] == "reached" and table.attrs["bifurcations"][0]["located"]
+    assert table.loc[table.branch == 1, "period"].eq(2).all() and (table.branch == 1).sum() == 3
+    assert table.loc[table.kind == "point", "residual"].max() < 1e-9
+    raw = api.branch(job_id, format="json")
+    assert table[value].iloc[0] == raw["points"][0]["value"] and raw["switched"][0]["period"] == 2
+    with pytest.raises(ApiError) as caught:
+        api.branch(ball_job[0])
+    assert caught.value.status == 409
+    done = _cli(base, "get", job_id[:8], "--what", "branch", "--out", "branch.nc", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    import xarray
+
+    with xarray.open_dataset(tmp_path / "branch.nc", engine="netcdf4") as ds:
+        assert ds.sizes["row"] == len(table) and ds.attrs["branch_status"] == "reached"
 
 
 def test_cli_get_saves_an_existing_jobs_and_ensembles_results(base, api, ball_job, tmp_path):

@@ -36,10 +36,10 @@ def base(tmp_path_factory) -> Iterator[str]:
         yield url
 
 
-def test_there_are_the_seven_tutorials_the_docs_list():
+def test_there_are_the_eight_tutorials_the_docs_list():
     names = [p.stem for p in TUTORIALS]
-    assert names == ["chaos-map", "ensemble", "first-job", "paper-report", "section-and-exponents", "theorem-1",
-                     "your-own-lagrangian"]
+    assert names == ["branches", "chaos-map", "ensemble", "first-job", "paper-report", "section-and-exponents",
+                     "theorem-1", "your-own-lagrangian"]
     nav = (ROOT / "mkdocs.yml").read_text()
     assert all(f"tutorials/{p.name}" in nav for p in TUTORIALS)
 

@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
 from nonholonomic.analysis.periodic_orbit import find_periodic_orbit
-from nonholonomic.analysis.periodic_orbit.bifurcations import LOCATE_TOLERANCE
+from nonholonomic.analysis.periodic_orbit.bifurcations import LOCATE_TOLERANCE, crossings, tests_at
 from nonholonomic.analysis.periodic_orbit.branch import BranchError, BranchOptions, follow_branch
 from tests.reference import ball_rhs
 from tests.unit.test_periodic_orbits import BALL, ball, centre_orbit, on_section
@@ -52,14 +52,14 @@ def section_trace(a3: float, x0: np.ndarray, t: float, h: float = 1e-6) -> float
     return float(np.trace(phi)) - 4.0
 
 
-def shoot(a3: float, x0: np.ndarray, t: float, level_energy: float) -> tuple[np.ndarray, float]:
-    """The periodic orbit near (x0, T) on gamma3 = 0, H = level_energy, (M, gamma) = 0, |gamma| = 1, by
+def shoot(a3: float, x0: np.ndarray, t: float, level_energy: float, area: float = 0.0) -> tuple[np.ndarray, float]:
+    """The periodic orbit near (x0, T) on gamma3 = 0, H = level_energy, (M, gamma) = area, |gamma| = 1, by
     scipy's least_squares on the ball's equations written again (no heyoka, no variational equations)."""
 
     def residual(z: np.ndarray) -> np.ndarray:
         x, period = z[:6], z[6]
         return np.concatenate([flow(a3, x, period) - x,
-                               [x[5], energy(a3, x) - level_energy, x[:3] @ x[3:], x[3:] @ x[3:] - 1.0]])
+                               [x[5], energy(a3, x) - level_energy, x[:3] @ x[3:] - area, x[3:] @ x[3:] - 1.0]])
 
     start = np.append(x0, t) + 1e-6 * np.array([1, -1, 1, 0, 0, 0, 1])
     fit = least_squares(residual, start, method="lm", xtol=1e-14, ftol=1e-14, gtol=1e-14)
@@ -163,13 +163,71 @@ def test_the_period_two_branch_is_followed_around_its_fold_in_the_field():
     assert all(q.checks_passed for q in branch.points if q.stability == "elliptic")
 
 
+def test_a_family_in_another_integral_moves_the_area_and_holds_the_energy():
+    system, p = ball("linear")
+    branch = follow_branch(system, p, centre_orbit(), BranchOptions("area", 0.5, max_points=20), tolerance=EPS)
+    assert branch.status == "reached" and len(branch.points) >= 4
+    for q in branch.points:
+        x = q.initial_state
+        assert x[:3] @ x[3:] == pytest.approx(q.value, abs=1e-12) and energy(0.5, x) == pytest.approx(2.0, abs=1e-12)
+        assert q.checks_passed
+    last = branch.points[-1]
+    x, t = shoot(0.5, last.initial_state, last.period_t, 2.0, area=last.value)
+    assert t == pytest.approx(last.period_t, abs=1e-8)
+
+
 @pytest.mark.parametrize(("options", "field"), [
     (BranchOptions("energy", 3.0, max_points=1), "max_points"),
     (BranchOptions("energy", 3.0, step=1.0, max_step=0.5), "step"),
     (BranchOptions("energy", 3.0, max_multiplier=1.0), "max_multiplier"),
+    (BranchOptions("momentum", 3.0), "in"),
 ])
 def test_refused_branch_options_are_named(options, field):
     system, p = ball("linear")
     with pytest.raises(BranchError) as err:
         follow_branch(system, p, centre_orbit(), options, tolerance=EPS)
     assert err.value.field == field
+
+
+def _monodromy(section: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A monodromy with 4 trivial multipliers (1) and the given section block; its section multipliers."""
+    k = len(section)
+    phi = np.eye(4 + k)
+    phi[4:, 4:] = section
+    return phi, np.linalg.eigvals(section)
+
+
+def _rotation(theta: float, r: float = 1.0) -> np.ndarray:
+    return r * np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+
+
+def _tests(section: np.ndarray, t_lambda: float = 1.0, measure: bool = True):
+    phi, mu = _monodromy(section)
+    return tests_at(t_lambda, phi, 4, mu, measure)
+
+
+def test_the_test_functions_change_sign_at_their_bifurcations_only():
+    """Each test function against the multipliers it stands for: P(+-1) = 1 -+ tr + det of the section block,
+    the resonances at trace -1 and 0, Neimark-Sacker at |mu| = 1 of a complex pair, Krein by the count."""
+    ell = _tests(_rotation(2.0))
+    assert ell.plus_one == pytest.approx(2 - 2 * np.cos(2.0)) and ell.minus_one == pytest.approx(2 + 2 * np.cos(2.0))
+    hyper = np.diag([-1.2, -1 / 1.2])
+    assert [c.kind for c in crossings(_tests(_rotation(2.9)), _tests(hyper))] == ["period_doubling"]
+    # through +1 with the branch turning back: a fold; without the turn: a tangent bifurcation
+    saddle = np.diag([1.3, 1 / 1.3])
+    assert [c.kind for c in crossings(_tests(_rotation(0.1)), _tests(saddle, -1.0))] == ["fold"]
+    assert [c.kind for c in crossings(_tests(_rotation(0.1)), _tests(saddle))] == ["tangent"]
+    # the elliptic angle through 2 pi / 3 (trace -1) and pi / 2 (trace 0)
+    kinds = [c.kind for c in crossings(_tests(_rotation(1.5)), _tests(_rotation(2.2)))]
+    assert kinds == ["resonance_1:3", "resonance_1:4"]
+    assert crossings(_tests(_rotation(1.5)), _tests(_rotation(1.52))) == []
+    # a map that does not preserve a measure: a complex pair leaving the unit circle
+    assert [c.kind for c in crossings(_tests(_rotation(1.0, 0.99), measure=False),
+                                      _tests(_rotation(1.0, 1.01), measure=False))] == ["neimark_sacker"]
+    # a four-dimensional section map: two pairs collide on the circle and leave it (Krein)
+    on = np.zeros((4, 4))
+    on[:2, :2], on[2:, 2:] = _rotation(1.0), _rotation(1.2)
+    off = np.zeros((4, 4))
+    off[:2, :2], off[2:, 2:] = _rotation(1.1, 1.05), _rotation(1.1, 1 / 1.05)
+    [krein] = crossings(_tests(on), _tests(off))
+    assert krein.kind == "krein_collision" and not krein.smooth

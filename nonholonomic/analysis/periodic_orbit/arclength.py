@@ -3,8 +3,9 @@
 A branch of periodic orbits is a curve z(s) = (x₀, T, λ) of solutions of the closing equations of
 :mod:`.newton` in which λ is
 
-* a **level** of an integral (``"energy"``): the energy row's target is λ, the other integrals of the level
-  keep the seed's values; ∂R/∂λ is −1 in that row (scaled like it), zero elsewhere;
+* a **level** of an integral (``"energy"``, or another of the system's integrals): that integral's row has
+  target λ, the level's other integrals keep the seed's values; ∂R/∂λ is −1 in that row (scaled like it),
+  zero elsewhere;
 * a **parameter** (its index in the parameter vector): the whole level is held; ∂R/∂λ is ∂x(T)/∂λ from
   heyoka's parameter sensitivities (``hy.var_ode_sys`` with the state variables and the runtime parameters
   that λ moves as arguments, of the one definition: :func:`.newton.flow` with ``pars``) and ∂(rows)/∂λ of
@@ -39,10 +40,11 @@ DERIVED_STEP = 1e-6
 
 @dataclass(frozen=True)
 class Continued:
-    """What λ is: ``energy_row`` (the row whose target λ is) or ``parameter_index`` (λ = p[index])."""
+    """What λ is: ``level_row`` (the algebraic row of the integral whose target λ is) or ``parameter_index``
+    (λ = p[index])."""
 
     name: str
-    energy_row: int | None = None
+    level_row: int | None = None
     parameter_index: int | None = None
 
 
@@ -64,8 +66,8 @@ class ArcClosing(Closing):
     def targets_at(self, lam: float) -> np.ndarray:
         """The rows' targets at λ."""
         targets = self.targets.copy()
-        if self.continued.energy_row is not None:
-            targets[self.continued.energy_row] = lam
+        if self.continued.level_row is not None:
+            targets[self.continued.level_row] = lam
         return targets
 
     def _moved_pars(self, lam: float) -> tuple[tuple[int, ...], np.ndarray]:
@@ -99,8 +101,8 @@ class ArcClosing(Closing):
         R, J, norms = self.assemble(x0, p, self.targets_at(lam), fl, 1)
         if fl.dx_dlambda is not None:
             J[:n, n + 1] = fl.dx_dlambda / self.scale
-        if self.continued.energy_row is not None:
-            J[n + self.continued.energy_row, n + 1] = -1.0 / norms[self.continued.energy_row] / self.scale
+        if self.continued.level_row is not None:
+            J[n + self.continued.level_row, n + 1] = -1.0 / norms[self.continued.level_row] / self.scale
         else:
             h = DERIVED_STEP * max(1.0, abs(lam))
             up = self.rows.values(x0[None, :], self.parameters(lam + h))[0]

@@ -2,7 +2,7 @@
 located and labelled and, at each period doubling, the period-2k branch followed.
 
 :func:`follow_branch` starts from a closed orbit (:func:`nonholonomic.analysis.periodic_orbit.find_periodic_orbit`)
-and moves λ, the energy (the family of a conservative system at fixed parameters, the level's other
+and moves λ, the energy or another integral (the family of a conservative system at fixed parameters, the level's other
 integrals held) or one parameter (the whole level held), towards ``to``: predictor z + h t along the tangent,
 corrector on the closing equations with Keller's arclength row (:mod:`.arclength`). The step h grows by 1.5
 after a correction of at most 3 iterations, halves after one of 6 or more, and after a failure or a turn of
@@ -62,8 +62,9 @@ class BranchError(RefusedField):
 
 @dataclass(frozen=True)
 class BranchOptions:
-    """What to continue (``continued``: ``"energy"`` or a parameter path, with ``parameter_index`` its index
-    in the parameter vector) and up to where (``to``); step control in the arclength of z = (x₀, T, λ)."""
+    """What to continue (``continued``: an integral's name, ``"energy"``, or a parameter path, with
+    ``parameter_index`` its index in the parameter vector) and up to where (``to``); step control in the
+    arclength of z = (x₀, T, λ)."""
 
     continued: str
     to: float
@@ -146,7 +147,7 @@ class OrbitBranch:
 
 
 def check_branch(system: MechanicalSystem, options: BranchOptions, level: Sequence[str]) -> tuple[str, ...]:
-    """The level the branch holds (with ``energy`` added for a family in energy).
+    """The level the branch holds (with the continued integral added for a family in one).
 
     Raises
     ------
@@ -155,11 +156,11 @@ def check_branch(system: MechanicalSystem, options: BranchOptions, level: Sequen
     """
     names = [i.name for i in system.integrals]
     if options.parameter_index is None:
-        if "energy" not in names:
-            raise BranchError("in", f"{system.kind} has no integral named energy; its integrals: "
-                                    f"{', '.join(names) or 'none'}; continue a parameter instead")
-        if "energy" not in level:
-            level = tuple(level) + ("energy",)
+        if options.continued not in names:
+            raise BranchError("in", f"{system.kind} has no integral named {options.continued}; its integrals: "
+                                    f"{', '.join(names) or 'none'}; or continue a parameter")
+        if options.continued not in level:
+            level = tuple(level) + (options.continued,)
     if not 2 <= options.max_points <= MAX_BRANCH_POINTS:
         raise BranchError("max_points", f"must be 2 .. {MAX_BRANCH_POINTS}, got {options.max_points}")
     if not 0 < options.min_step <= options.step <= options.max_step:
@@ -335,8 +336,9 @@ def follow_branch(system: MechanicalSystem, p: np.ndarray, start: PeriodicOrbit,
     x0 = np.asarray(start.initial_state, dtype=float)
     targets = level_values(p, x0, value, level, r)
     if options.parameter_index is None:
-        continued = Continued("energy", energy_row=1 + level.index("energy"))
-        lam0 = float(targets[1 + level.index("energy")])
+        row = 1 + level.index(options.continued)
+        continued = Continued(options.continued, level_row=row)
+        lam0 = float(targets[row])
     else:
         continued = Continued(options.continued, parameter_index=options.parameter_index)
         lam0 = float(p[options.parameter_index])
