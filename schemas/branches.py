@@ -67,27 +67,26 @@ class OrbitBranchRequest(BaseModel):
             return found
         group, index = sweep_target(system, self.continued)
         try:
+            start = parameter_vector(system, parameters)[self.parameter_index(system, parameters)]
             parameter_vector(system, swept(parameters, group, index, self.to))
         except ValueError as exc:
             found.append(FieldProblem(f"{prefix}.to", str(exc)))
+            return found
+        if float(start) == self.to:
+            found.append(FieldProblem(f"{prefix}.to", f"is the job's own {self.continued} ({self.to:g}): a branch "
+                                                      "goes from it to another value"))
         return found
 
     def parameter_index(self, system: MechanicalSystem, parameters: dict[str, Any]) -> int:
-        """The index in the parameter vector of the parameter the path names.
+        """The index in the parameter vector (``system.parameter_symbols``' order) of the parameter the path names.
 
         Raises
         ------
         ValueError
-            An unknown path, or one that moves more than one entry of the vector.
+            An unknown path.
         """
         group, index = sweep_target(system, self.continued)
-        base = parameter_vector(system, parameters)
-        moved = parameter_vector(system, swept(parameters, group, index, _nudged(parameters, group.name, index)))
-        changed = np.flatnonzero(moved != base)
-        if len(changed) != 1:
-            raise ValueError(f"{self.continued!r} moves {len(changed)} entries of the parameter vector; a branch "
-                             "continues one")
-        return int(changed[0])
+        return list(system.parameter_symbols).index(group.symbols[0 if index is None else index])
 
     def options(self, system: MechanicalSystem, parameters: dict[str, Any]) -> BranchOptions:
         integral = self.continued in [i.name for i in system.integrals]
@@ -95,12 +94,6 @@ class OrbitBranchRequest(BaseModel):
         return BranchOptions(self.continued, float(self.to), index, self.max_points, self.step, self.min_step,
                              self.max_step, self.switch, self.switch_points, self.check_every,
                              self.max_multiplier)
-
-
-def _nudged(parameters: dict[str, Any], name: str, index: int | None) -> float:
-    """A value of the parameter different from the request's (its own plus a small amount)."""
-    value = parameters[name] if index is None else parameters[name][index]
-    return float(value) * (1 + 1e-3) + 1e-3
 
 
 class BranchPointItem(BaseModel):

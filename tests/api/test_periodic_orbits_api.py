@@ -76,6 +76,7 @@ def test_a_seed_that_does_not_return_gives_not_found_with_its_reason_and_the_job
     ({"surface": "gamma3", "sweep": {"parameter": "D", "values": []}}, "periodic_orbit.sweep.values", []),
     ({"surface": "gamma3", "branch": {"in": "Q", "to": 1.0}}, "periodic_orbit.branch.in", ["Q"]),
     ({"surface": "gamma3", "branch": {"in": "D", "to": -1.0}}, "periodic_orbit.branch.to", []),
+    ({"surface": "gamma3", "branch": {"in": "D", "to": 0.7}}, "periodic_orbit.branch.to", ["own D"]),
     ({"surface": "gamma3", "branch": {"in": "energy", "to": 1.0, "step": 0.5, "max_step": 0.2}},
      "periodic_orbit.branch.step", ["max_step"]),
     ({"surface": "gamma3", "branch": {"in": "energy", "to": 1.0, "max_points": 1}}, "periodic_orbit.branch.max_points",

@@ -302,7 +302,7 @@ def test_ensemble_section_and_exponents(client):
     assert len(drawn.get_offsets()) == sum(m["poincare"]["count"] for m in members)
     assert sorted(set(drawn.get_array().tolist())) == [m["index"] for m in members if m["poincare"]["count"]]
     assert drawn.get_rasterized() and ax.get_xlabel() == "γ₁ [1]"
-    assert plots.ENSEMBLE_PLOTS == ("poincare", "exponents", "map")  # a map's: tests/api/test_chaos_maps_api.py
+    assert plots.ENSEMBLE_PLOTS == ("poincare", "exponents", "map", "orbit_diagram")  # the last two: their own tests
     with pytest.raises(PlotUnavailable, match="not a chaos map"):
         ensemble_plot("map", view, iter(members), "png")
     for name in ("poincare", "exponents"):

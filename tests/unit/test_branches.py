@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
 from nonholonomic.analysis.periodic_orbit import find_periodic_orbit
-from nonholonomic.analysis.periodic_orbit.bifurcations import LOCATE_TOLERANCE, crossings, tests_at
+from nonholonomic.analysis.periodic_orbit.bifurcations import LOCATE_TOLERANCE, bifurcation_tests, crossings
 from nonholonomic.analysis.periodic_orbit.branch import BranchError, BranchOptions, follow_branch
 from tests.reference import ball_rhs
 from tests.unit.test_periodic_orbits import BALL, ball, centre_orbit, on_section
@@ -176,6 +176,14 @@ def test_a_family_in_another_integral_moves_the_area_and_holds_the_energy():
     assert t == pytest.approx(last.period_t, abs=1e-8)
 
 
+def test_a_branch_to_its_own_start_is_that_one_orbit():
+    system, p = ball("linear")
+    start = centre_orbit()
+    branch = follow_branch(system, p, start, BranchOptions("energy", start.level["energy"]), tolerance=EPS)
+    assert branch.status == "reached" and len(branch.points) == 1 and "already" in branch.reason
+    assert np.max(np.abs(branch.points[0].initial_state - start.initial_state)) < 1e-12
+
+
 @pytest.mark.parametrize(("options", "field"), [
     (BranchOptions("energy", 3.0, max_points=1), "max_points"),
     (BranchOptions("energy", 3.0, step=1.0, max_step=0.5), "step"),
@@ -203,7 +211,7 @@ def _rotation(theta: float, r: float = 1.0) -> np.ndarray:
 
 def _tests(section: np.ndarray, t_lambda: float = 1.0, measure: bool = True):
     phi, mu = _monodromy(section)
-    return tests_at(t_lambda, phi, 4, mu, measure)
+    return bifurcation_tests(t_lambda, phi, 4, mu, measure)
 
 
 def test_the_test_functions_change_sign_at_their_bifurcations_only():

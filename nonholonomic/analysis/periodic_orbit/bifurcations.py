@@ -60,8 +60,8 @@ def section_trace_det(monodromy: np.ndarray, trivial_count: int) -> tuple[float,
     return float(np.trace(monodromy)) - trivial_count, float(np.linalg.det(monodromy))
 
 
-def tests_at(t_lambda: float, monodromy: np.ndarray, trivial_count: int, section_mu: np.ndarray,
-             measure_preserving: bool) -> Tests:
+def bifurcation_tests(t_lambda: float, monodromy: np.ndarray, trivial_count: int, section_mu: np.ndarray,
+                      measure_preserving: bool) -> Tests:
     """The test functions of a point with tangent λ-component ``t_lambda`` and the section multipliers."""
     on_circle = int(np.sum((np.abs(np.abs(section_mu) - 1.0) <= ON_CIRCLE) & (np.abs(section_mu.imag) > 1e-12)))
     if len(section_mu) == 2:

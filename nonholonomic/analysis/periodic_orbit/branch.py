@@ -34,11 +34,11 @@ from nonholonomic.analysis.periodic_orbit import (
 from nonholonomic.analysis.periodic_orbit.arclength import ArcClosing, Continued, Correction, correct, tangent
 from nonholonomic.analysis.periodic_orbit.bifurcations import (
     Tests,
+    bifurcation_tests,
     crossings,
     doubled_tangent,
     locate,
     section_trace_det,
-    tests_at,
 )
 from nonholonomic.analysis.periodic_orbit.newton import CancelCheck, level_values, rows
 from nonholonomic.analysis.poincare.surface import parse_surface
@@ -53,6 +53,8 @@ MAX_TURN_COS = 0.9
 KERNEL_DEGENERATE = 1e-9
 #: Most points of one branch, and most branches switched onto.
 MAX_BRANCH_POINTS = 400
+#: ``to`` within this (relative) of the start's value: the branch is the start orbit alone.
+AT_START = 1e-12
 MAX_SWITCHES = 4
 
 
@@ -207,7 +209,7 @@ class _Follower:
         coords = tuple(float(c) for c in self.coordinate_kernel(x[None, :], p)[0][: len(self.coordinates)])
         bp = BranchPoint(lam, x, period_t, tau, coords, ms.section, trace, stability, corr.residual, arclength,
                          float(t[n + 1]), checks)
-        return bp, tests_at(float(t[n + 1]), fl.monodromy, ms.trivial_count, ms.section, self.measure)
+        return bp, bifurcation_tests(float(t[n + 1]), fl.monodromy, ms.trivial_count, ms.section, self.measure)
 
     def independent(self, bp: BranchPoint) -> BranchPoint:
         """The point with scipy's DOP853 closing check added."""
@@ -358,7 +360,11 @@ def follow_branch(system: MechanicalSystem, p: np.ndarray, start: PeriodicOrbit,
     if t0[n + 1] * (options.to - lam0) < 0:
         t0 = -t0
     follower = _Follower(system, closing, options, k, coords, bounds, tolerance)
-    points, found, status, reason = follower.run(corr0, t0, options.max_points)
+    if abs(lam0 - options.to) <= AT_START * max(1.0, abs(lam0)):
+        points, found, status, reason = [follower.point(corr0, t0, 0.0)[0]], list[Bifurcation](), "reached", (
+            f"the start orbit is at {options.continued} = {lam0:.17g} already")
+    else:
+        points, found, status, reason = follower.run(corr0, t0, options.max_points)
     points = _with_evidence(follower, points, found, options.check_every)
     found = [replace(b, point=follower.independent(b.point)) for b in found]
     switched: list[OrbitBranch] = []
