@@ -33,6 +33,7 @@ from nonholonomic.analysis.periodic_orbit import (
 )
 from nonholonomic.analysis.periodic_orbit.arclength import ArcClosing, Continued, Correction, correct, tangent
 from nonholonomic.analysis.periodic_orbit.bifurcations import (
+    Crossing,
     Tests,
     bifurcation_tests,
     crossings,
@@ -296,13 +297,18 @@ class _Follower:
         return points, found, "max_points", f"{max_points} points (max_points) before {self.options.continued} = " \
                                             f"{self.options.to:g}"
 
-    def _located(self, crossing, z_a, t_a, h, corr_b, tests_b, t_b, tests_a, index, s_a) -> Bifurcation:  # noqa: ANN001
+    def _located(self, crossing: Crossing, z_a: np.ndarray, t_a: np.ndarray, h: float, corr_b: Correction,
+                 tests_b: Tests, t_b: np.ndarray, tests_a: Tests, index: int, s_a: float) -> Bifurcation:
+        """The bifurcation ``crossing`` between point ``index`` (z_a, t_a, at arclength s_a) and the next (corr_b),
+        a step h apart, located."""
         n = self.system.dimension
         loc = locate(self.closing, z_a, t_a, h, crossing, self.evaluate_tests, corr_b, tests_b, t_b, tests_a)
         bp, _ = self.point(loc.correction, loc.tangent, s_a + loc.arclength)
-        detail = _DETAILS[crossing.kind.split(":")[0] if crossing.kind.startswith("resonance") else crossing.kind]
+        kind, _, q = crossing.kind.partition(":")
+        detail = _DETAILS[kind].format(k=self.period, k2=2 * self.period, q=q or "",
+                                       kq=self.period * int(q) if q else "")
         return Bifurcation(crossing.kind, float(loc.correction.z[n + 1]), index, bp, loc.test_value, loc.bracket,
-                           loc.trials, loc.located, detail.format(k=self.period, k2=2 * self.period))
+                           loc.trials, loc.located, detail)
 
 
 _DETAILS = {
@@ -310,8 +316,8 @@ _DETAILS = {
     "tangent": "a section multiplier passes through +1 where the branch goes on: a pitchfork or transcritical "
                "branch point (another branch of period {k} crosses)",
     "period_doubling": "a section multiplier passes through -1: a period-{k2} orbit is born or dies here",
-    "resonance_1": "the elliptic multipliers pass a root of unity (trace -1: 1:3, trace 0: 1:4): an island chain "
-                   "of that period is born about the orbit",
+    "resonance_1": "the elliptic multipliers pass exp(+-2 pi i/{q}) (trace 2 cos(2 pi/{q})): {q} islands about each of "
+                   "its points, an orbit of period {kq}, are born or pass through it",
     "neimark_sacker": "a complex pair of multipliers crosses the unit circle: an invariant curve of the section "
                       "map is born or dies",
     "krein_collision": "two pairs of multipliers on the unit circle collide and leave it (or enter it): the orbit "
