@@ -16,9 +16,6 @@ from nonholonomic.numerics.kernels import parameter_vector
 from schemas.sweeps import sweep_target, swept
 from schemas.systems import FiniteFloat
 
-BIFURCATION_KINDS = ("fold", "tangent", "period_doubling", "resonance_1:3", "resonance_1:4", "neimark_sacker",
-                     "krein_collision")
-
 
 class OrbitBranchRequest(BaseModel):
     """Follow the orbit as a branch by pseudo-arclength continuation, through folds, locating its bifurcations and
@@ -45,7 +42,6 @@ class OrbitBranchRequest(BaseModel):
     check_every: int = Field(10, ge=1, le=MAX_BRANCH_POINTS,
                              description="scipy's DOP853 re-checks the closing at every check_every-th point, the "
                                          "ends and each bifurcation")
-
     max_multiplier: float = Field(1e3, gt=1, le=1e12,
                                   description="the branch stops where a section multiplier's modulus exceeds this "
                                               "(the closing equations lose digits; near a homoclinic orbit T grows "
@@ -60,14 +56,14 @@ class OrbitBranchRequest(BaseModel):
         if self.continued in [i.name for i in system.integrals]:
             return found
         try:
-            self.parameter_index(system, parameters)
+            self.parameter_index(system)
         except ValueError as exc:
             integrals = ", ".join(i.name for i in system.integrals) or "none"
             found.append(FieldProblem(f"{prefix}.in", f"{exc}; or one of its integrals: {integrals}"))
             return found
         group, index = sweep_target(system, self.continued)
         try:
-            start = parameter_vector(system, parameters)[self.parameter_index(system, parameters)]
+            start = parameter_vector(system, parameters)[self.parameter_index(system)]
             parameter_vector(system, swept(parameters, group, index, self.to))
         except ValueError as exc:
             found.append(FieldProblem(f"{prefix}.to", str(exc)))
@@ -77,7 +73,7 @@ class OrbitBranchRequest(BaseModel):
                                                       "goes from it to another value"))
         return found
 
-    def parameter_index(self, system: MechanicalSystem, parameters: dict[str, Any]) -> int:
+    def parameter_index(self, system: MechanicalSystem) -> int:
         """The index in the parameter vector (``system.parameter_symbols``' order) of the parameter the path names.
 
         Raises
@@ -90,7 +86,7 @@ class OrbitBranchRequest(BaseModel):
 
     def options(self, system: MechanicalSystem, parameters: dict[str, Any]) -> BranchOptions:
         integral = self.continued in [i.name for i in system.integrals]
-        index = None if integral else self.parameter_index(system, parameters)
+        index = None if integral else self.parameter_index(system)
         return BranchOptions(self.continued, float(self.to), index, self.max_points, self.step, self.min_step,
                              self.max_step, self.switch, self.switch_points, self.check_every,
                              self.max_multiplier)
