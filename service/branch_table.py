@@ -16,12 +16,13 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from service.members_table import _cell, table_variables
+from service.exports import result_components
+from service.members_table import _cell, component_header, table_variables
 
 
 def _point_row(point: Mapping[str, Any], value_header: str, coordinate_headers: list[str]) -> dict[str, Any]:
@@ -38,11 +39,13 @@ def _point_row(point: Mapping[str, Any], value_header: str, coordinate_headers: 
     return row
 
 
-def branch_rows(branch: Mapping[str, Any], units: Mapping[str, str]) -> list[dict[str, Any]]:
-    """Every row of the table (see the module docstring), the switched branches after the job's."""
+def branch_rows(branch: Mapping[str, Any], names: Mapping[str, Sequence[str]],
+                units: Mapping[str, str]) -> list[dict[str, Any]]:
+    """Every row of the table (see the module docstring), the switched branches after the job's; ``names`` and
+    ``units``: the system's components and their vectors' units, for the section coordinates' headers."""
     value_unit = (branch.get("units") or {}).get("value")
     value_header = f"{branch['in']} [{value_unit}]" if value_unit else str(branch["in"])
-    coordinate_headers = [f"{c} [{units[c]}]" if c in units else c for c in branch.get("coordinate_names") or []]
+    coordinate_headers = [component_header(c, names, units) for c in branch.get("coordinate_names") or []]
     rows: list[dict[str, Any]] = []
     for number, b in enumerate([branch, *(branch.get("switched") or [])]):
         after: dict[int, list[Mapping[str, Any]]] = {}
@@ -58,13 +61,6 @@ def branch_rows(branch: Mapping[str, Any], units: Mapping[str, str]) -> list[dic
     return rows
 
 
-def _component_units(result: Mapping[str, Any]) -> dict[str, str]:
-    """Each state component's unit (``gamma1`` → its vector's)."""
-    units = result["system"]["units"]
-    names = result["system"].get("components") or {}
-    return {c: units[v] for v, components in names.items() for c in components if v in units}
-
-
 def _header(rows: list[dict[str, Any]]) -> list[str]:
     header: dict[str, None] = {}
     for row in rows:
@@ -72,9 +68,10 @@ def _header(rows: list[dict[str, Any]]) -> list[str]:
     return list(header)
 
 
-def branch_csv(result: Mapping[str, Any]) -> Iterator[str]:
+def branch_csv(result: Mapping[str, Any], request: Mapping[str, Any]) -> Iterator[str]:
     """The table as CSV text (floats written to read back exactly)."""
-    rows = branch_rows(result["periodic_orbit"]["branch"], _component_units(result))
+    rows = branch_rows(result["periodic_orbit"]["branch"], result_components(result, request),
+                       result["system"]["units"])
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     header = _header(rows)
@@ -91,7 +88,7 @@ def branch_netcdf(job_id: str, created_at: str, result: Mapping[str, Any], reque
     from service.exports_netcdf import _job_attrs, write_netcdf
 
     branch = result["periodic_orbit"]["branch"]
-    rows = branch_rows(branch, _component_units(result))
+    rows = branch_rows(branch, result_components(result, request), result["system"]["units"])
     variables = table_variables(rows, _header(rows), "row", {"checks_passed": "not_checked failed passed",
                                                               "located": "none no yes"})
     attrs = _job_attrs(f"{result['system'].get('title', '')}: branch of periodic orbits of job {job_id}", job_id,

@@ -30,6 +30,12 @@ def _unit_of_component(name: str, names: Mapping[str, Sequence[str]], units: Map
     return None
 
 
+def component_header(name: str, names: Mapping[str, Sequence[str]], units: Mapping[str, str]) -> str:
+    """A component's column header with its vector's unit (``gamma1 [1]``), or its name alone."""
+    unit = _unit_of_component(name, names, units)
+    return f"{name} [{unit}]" if unit else name
+
+
 def _label_columns(label: Mapping[str, Any] | None, names: Mapping[str, Sequence[str]],
                    units: Mapping[str, str]) -> list[tuple[str, Any]]:
     """``(header, value)`` of what sets a member apart (its ``label``)."""
@@ -45,8 +51,7 @@ def _label_columns(label: Mapping[str, Any] | None, names: Mapping[str, Sequence
         if key == "cell" and isinstance(value, (list, tuple)) and len(value) == 2:
             out += [("cell_i", value[0]), ("cell_j", value[1])]
         else:
-            unit = _unit_of_component(str(key), names, units)
-            out.append((f"{key} [{unit}]" if unit else str(key), value))
+            out.append((component_header(str(key), names, units), value))
     return out
 
 

@@ -17,6 +17,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from schemas.sweeps import PATH as SWEEP_PATH
+from service.exports import vector_components
+from service.members_table import component_header
 from service.plots import (
     MAX_SECTION_POINTS,
     PlotUnavailable,
@@ -24,7 +26,6 @@ from service.plots import (
     _headline,
     _new_figure,
     _thin,
-    _vector_of,
 )
 
 
@@ -68,14 +69,10 @@ def diagram_rows(request: Mapping[str, Any], members: Iterable[tuple[int, Mappin
         columns["c0"] += points[:, 0].tolist()
         columns["c1"] += points[:, 1].tolist()
     names = names or [str(c) for c in (request.get("poincare") or {}).get("coordinates") or ["c0", "c1"]]
+    components = vector_components(request["system"])
     headers = ["member", _value_header(parameter, units), "crossing",
-               *(_axis_header(n, units) for n in names)]
+               *(component_header(n, components, units) for n in names)]
     return headers, columns
-
-
-def _axis_header(name: str, units: Mapping[str, str]) -> str:
-    unit = units.get(name) or units.get(_vector_of(name))
-    return f"{name} [{unit}]" if unit else name
 
 
 def diagram_csv(request: Mapping[str, Any], members: Iterable[tuple[int, Mapping[str, Any]]],

@@ -207,7 +207,7 @@ def get_branch(job_id: str, request: Request, backend: Backend, owner: Owner,
                                              "orbit was not found", CONFLICT)
     filename = f"job-{job_id}-branch.{SUFFIXES[format]}"
     if format == "csv":
-        return download(request, branch_csv(result), MEDIA_TYPES[format], filename)
+        return download(request, branch_csv(result, record.request), MEDIA_TYPES[format], filename)
     if format == "netcdf":
         from service.branch_table import branch_netcdf
 

@@ -54,7 +54,7 @@ class ArcClosing(Closing):
     evaluation kept (z = (x₀, T, λ); ``p`` and ``targets`` are the start's, λ replaces what it moves)."""
 
     continued: Continued = field(default_factory=lambda: Continued(""))
-    _moved: dict[float, tuple[tuple[int, ...], np.ndarray]] = field(default_factory=dict, repr=False)
+    _moved: tuple[int, ...] | None = field(default=None, repr=False)
 
     def parameters(self, lam: float) -> np.ndarray:
         """The parameter vector at λ."""
@@ -71,19 +71,19 @@ class ArcClosing(Closing):
         return targets
 
     def _moved_pars(self, lam: float) -> tuple[tuple[int, ...], np.ndarray]:
-        """The runtime parameters λ moves and their derivatives (the user's parameter exactly, derived ones by a
-        central difference of their algebraic formulas)."""
-        if lam not in self._moved:
-            ts = taylor_system(self.system)
-            h = DERIVED_STEP * max(1.0, abs(lam))
-            up, down = ts.runtime_parameters(self.parameters(lam + h)), ts.runtime_parameters(self.parameters(lam - h))
-            d = (up - down) / (2 * h)
-            index = self.continued.parameter_index
-            assert index is not None
-            d[index] = 1.0
-            moved = tuple(int(i) for i in np.flatnonzero(np.abs(d) > 1e-12 * max(1.0, float(np.max(np.abs(d))))))
-            self._moved = {lam: (moved, d[list(moved)])}
-        return self._moved[lam]
+        """The runtime parameters λ moves and their derivatives at λ (the user's parameter exactly, derived ones by a
+        central difference of their algebraic formulas). Which ones move is fixed at the first call, so one
+        sensitivity integrator serves the whole branch."""
+        ts = taylor_system(self.system)
+        h = DERIVED_STEP * max(1.0, abs(lam))
+        up, down = ts.runtime_parameters(self.parameters(lam + h)), ts.runtime_parameters(self.parameters(lam - h))
+        d = (up - down) / (2 * h)
+        index = self.continued.parameter_index
+        assert index is not None
+        d[index] = 1.0
+        if self._moved is None:
+            self._moved = tuple(int(i) for i in np.flatnonzero(np.abs(d) > 1e-12 * max(1.0, float(np.max(np.abs(d))))))
+        return self._moved, d[list(self._moved)]
 
     def evaluate(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, Flow]:
         """R(z), J_λ(z) (rows × (n + 2)) and the flow, for z = (x₀, T, λ)."""

@@ -25,6 +25,7 @@ import numpy as np
 
 from nonholonomic.analysis.periodic_orbit import (
     INDEPENDENT_TOLERANCE,
+    Multipliers,
     OrbitCheck,
     PeriodicOrbit,
     product_check,
@@ -41,7 +42,7 @@ from nonholonomic.analysis.periodic_orbit.bifurcations import (
     locate,
     section_trace_det,
 )
-from nonholonomic.analysis.periodic_orbit.newton import CancelCheck, level_values, rows
+from nonholonomic.analysis.periodic_orbit.newton import CancelCheck, Flow, level_values, rows
 from nonholonomic.analysis.poincare.surface import parse_surface
 from nonholonomic.definition import MechanicalSystem
 from nonholonomic.numerics.integration import SCIPY_MIN_TOLERANCE, IntegrationError, integrate
@@ -210,7 +211,7 @@ class _Follower:
         coords = tuple(float(c) for c in self.coordinate_kernel(x[None, :], p)[0][: len(self.coordinates)])
         bp = BranchPoint(lam, x, period_t, tau, coords, ms.section, trace, stability, corr.residual, arclength,
                          float(t[n + 1]), checks)
-        return bp, bifurcation_tests(float(t[n + 1]), fl.monodromy, ms.trivial_count, ms.section, self.measure)
+        return bp, self._tests(ms, fl, t)
 
     def independent(self, bp: BranchPoint) -> BranchPoint:
         """The point with scipy's DOP853 closing check added."""
@@ -231,7 +232,16 @@ class _Follower:
         return replace(bp, checks=bp.checks + (check,), residual_independent=err)
 
     def evaluate_tests(self, corr: Correction, t: np.ndarray) -> Tests:
-        return self.point(corr, t, 0.0)[1]
+        """The test functions alone (a location's trial: no τ, coordinates or checks)."""
+        n = self.system.dimension
+        assert corr.flow is not None
+        x = corr.z[:n]
+        ms = split_multipliers(self.system, self.closing.parameters(float(corr.z[n + 1])), x, corr.flow)
+        return self._tests(ms, corr.flow, t)
+
+    def _tests(self, ms: Multipliers, fl: Flow, t: np.ndarray) -> Tests:
+        return bifurcation_tests(float(t[self.system.dimension + 1]), fl.monodromy, ms.trivial_count, ms.section,
+                                 self.measure)
 
     # -- the walk ---------------------------------------------------------------------------------------
     def run(self, start: Correction, t0: np.ndarray, max_points: int,
