@@ -12,7 +12,8 @@ COPY service ./service
 COPY workers ./workers
 COPY client ./client
 COPY store ./store
-RUN pip install --no-cache-dir . && useradd --create-home app
+# the otel extra: OpenTelemetry traces, off unless the OTEL_* variables ask for them (docs/operating.md)
+RUN pip install --no-cache-dir ".[otel]" && useradd --create-home app
 USER app
 EXPOSE 8000
 CMD ["uvicorn", "service.main:app", "--host", "0.0.0.0", "--port", "8000"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import Literal
 
 from pydantic import AliasChoices, Field
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -94,6 +95,15 @@ class Settings(BaseSettings):
                                        "this after a job is replaced by a new one (compiled code of many distinct "
                                        "user expressions is not all given back); 0: never")
     worker_max_jobs: int = Field(0, ge=0, description="jobs after which a worker's pool process is replaced (0: never)")
+    metrics: bool = Field(True, description="Prometheus metrics: the API's GET /metrics (behind the API keys when "
+                                            "they are on) and its request counts and durations; false: neither")
+    worker_metrics_port: int = Field(9191, ge=0, le=65535, description="port on which a Celery worker serves its "
+                                     "metrics (every pool process's, added up; PROMETHEUS_MULTIPROC_DIR); 0: none")
+    log_format: Literal["json", "text"] = Field("json", description="log lines of the API and the workers: one JSON "
+                                                "object each, with the request id and job id ('json'), or plain text")
+    worker_soft_shutdown_s: float = Field(0.0, ge=0, description="Celery's soft shutdown: on a cold shutdown "
+                                          "(SIGQUIT, or SIGTERM with REMAP_SIGTERM=SIGQUIT) running tasks get this "
+                                          "many seconds to end before they are put back in the queue (0: none)")
 
     @property
     def embedded(self) -> bool:

@@ -119,13 +119,45 @@ def ensure_nginx() -> dict[str, str]:
     return {}
 
 
+def ensure_kubectl() -> None:
+    """``kubectl kustomize`` for the Kubernetes deployment's tests (tests/deploy): Debian's
+    ``kubernetes-client`` installed if missing; without it those tests are skipped, saying why."""
+    if shutil.which("kubectl") is None and not apt_install("kubernetes-client"):
+        say("no kubectl (not root, or apt-get failed): the Kubernetes deployment's tests are skipped")
+
+
+def ensure_promtool() -> dict[str, str]:
+    """``promtool check rules`` for the alert rules (tests/deploy): the binary out of Debian's ``prometheus``
+    package, unpacked into .venv/tools (``apt-get download`` + ``dpkg -x``: no Prometheus service is
+    installed or started); returns the PATH that finds it (empty if it is on PATH or cannot be had)."""
+    if shutil.which("promtool") is not None:
+        return {}
+    tools = ROOT / ".venv" / "tools" / "prometheus"
+    binary = tools / "usr" / "bin" / "promtool"
+    if not binary.exists() and shutil.which("apt-get") and shutil.which("dpkg"):
+        with tempfile.TemporaryDirectory() as folder:
+            download = ["apt-get", "download", "-qq", "prometheus"]  # as root: apt warns it runs unsandboxed
+            if subprocess.run(download, cwd=folder, check=False, stderr=subprocess.DEVNULL).returncode:
+                subprocess.run(["apt-get", "update", "-qq"], check=False)
+                subprocess.run(download, cwd=folder, check=False, stderr=subprocess.DEVNULL)
+            for deb in Path(folder).glob("prometheus_*.deb"):
+                tools.mkdir(parents=True, exist_ok=True)
+                subprocess.run(["dpkg", "-x", str(deb), str(tools)], check=False)
+        (binary.parent / "prometheus").unlink(missing_ok=True)  # only promtool is used (48 MB of 96)
+    if not binary.exists():
+        say("no promtool (apt-get download prometheus failed): the alert rules' promtool check is skipped")
+        return {}
+    return {"PATH": f"{binary.parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+
+
 def main(argv: list[str]) -> int:
     ensure_installed("test")
     lint = subprocess.run([str(PYTHON), "-m", "ruff", "check", "--quiet", "."], cwd=ROOT).returncode
     typing = TypeCheck()  # beside the service starts and the tests: about 20 s of one core when cold
     ensure_redis()
     ensure_postgres()
-    env = {**os.environ, **ensure_nginx(), "NONHOLONOMIC_CHROMIUM": ensure_chromium(),
+    ensure_kubectl()
+    env = {**os.environ, **ensure_nginx(), **ensure_promtool(), "NONHOLONOMIC_CHROMIUM": ensure_chromium(),
            "NONHOLONOMIC_REQUIRE_BROWSER": "1",
            "NONHOLONOMIC_TEST_OUTPUT": os.environ.get("NONHOLONOMIC_TEST_OUTPUT", str(ROOT / "test-output"))}
     os.chdir(ROOT)

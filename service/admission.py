@@ -18,6 +18,7 @@ and ``reserve_messages``.
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 import time
 from collections.abc import AsyncIterator, Iterator
@@ -26,10 +27,14 @@ from typing import Any
 
 from schemas.problems import OVERLOADED, QUEUE_FULL, FieldError
 from schemas.settings import Settings
+from service import metrics
 from service.backends.base import JobBackend, JobRecord, QueueFull
 from service.errors import ProblemError, invalid_request
 from store.idempotency import KeyBinding
 from store.jobs import ActiveBoundReached
+from workers.metrics import job_kind
+
+log = logging.getLogger(__name__)
 
 #: Seconds assumed for a request before any has finished (for ``Retry-After``).
 _FIRST_GUESS_S = 5.0
@@ -62,6 +67,7 @@ class SymbolicPool:
         """Hold one slot for the body; wait for it if the queue has room, else raise a 503 problem."""
         if self.running >= self.size and self.waiting >= self.queue:
             self.refused += 1
+            metrics.refused("symbolic_pool_busy")
             retry = self.retry_after_s()
             raise ProblemError(
                 503, "Symbolic pool busy",
@@ -93,12 +99,14 @@ QUEUE_FULL_RETRY_S = 10
 
 
 def _too_many_jobs(active: int, settings: Settings) -> ProblemError:
+    metrics.refused("too_many_jobs")
     return ProblemError(429, "Too many jobs", f"this key has {active} queued or running jobs, the most it may have "
                         f"(max_active_jobs_per_key={settings.max_active_jobs_per_key}); retry when some have finished",
                         QUEUE_FULL, headers={"Retry-After": str(QUEUE_FULL_RETRY_S)})
 
 
 def _queue_full(waiting: int, messages: int, settings: Settings) -> ProblemError:
+    metrics.refused("queue_full")
     what = "a job" if messages == 1 else f"{messages} ensemble chunks"
     return ProblemError(429, "Queue full", f"{waiting} jobs and ensemble chunks wait in the queue (or are being sent); "
                         f"{what} more would exceed what it holds (max_queued_messages={settings.max_queued_messages}); "
@@ -133,7 +141,10 @@ def admit_job(backend: JobBackend, owner: str | None, settings: Settings, body: 
     if the key has ``max_active_jobs_per_key`` active jobs or the queue is full, else the queued job (its
     Idempotency-Key's ``binding`` recorded with it)."""
     with _admitted(backend, owner, settings, 1, adds_a_job=True) as max_active:
-        return backend.submit(body, owner, max_active=max_active, binding=binding)
+        record = backend.submit(body, owner, max_active=max_active, binding=binding)
+    metrics.submitted(body)
+    log.info("job submitted", extra={"job_id": record.id, "kind": job_kind(body)})
+    return record
 
 
 def admit_ensemble(backend: JobBackend, owner: str | None, settings: Settings, spec: dict[str, Any],
@@ -142,4 +153,6 @@ def admit_ensemble(backend: JobBackend, owner: str | None, settings: Settings, s
     with what is queued, or a 429 problem with ``Retry-After``); returns the ensemble's id."""
     with _admitted(backend, owner, settings, len(chunks), adds_a_job=False):
         ensemble_id, _ = backend.submit_ensemble(spec, chunks, owner, binding)
+    metrics.ensemble_submitted(spec)
+    log.info("ensemble submitted", extra={"job_id": ensemble_id, "kind": job_kind(spec), "chunks": len(chunks)})
     return ensemble_id

@@ -20,12 +20,14 @@ from fastapi_offline import FastAPIOffline
 
 import nonholonomic
 from schemas.settings import Settings, get_settings
+from service import metrics
 from service.access import Access, caller
 from service.admission import SymbolicPool
 from service.backends import make_backend
 from service.errors import install_error_handlers, problem_responses
 from service.isolated import start_fork_server
 from service.limits import BodyLimit
+from service.request_id import RequestId
 from service.routes import (
     ensembles,
     explore,
@@ -38,7 +40,9 @@ from service.routes import (
     systems,
 )
 from service.security import SecurityHeaders
+from workers import tracing
 from workers.disk_memo import install_disk_memo
+from workers.logs import HEADER, configure_api
 
 #: Where the pages' stylesheet and icon are served (``service/static``; no API key needed).
 STATIC_URL = "/static"
@@ -80,14 +84,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     install_error_handlers(app)
+    configure_api(chosen.log_format)
     app.state.settings = chosen
     app.state.access = Access(chosen)
     app.add_middleware(BodyLimit, limit=chosen.max_body_bytes)
     origins = [o.strip() for o in chosen.cors_origins.split(",") if o.strip()]
     if origins:
         app.add_middleware(CORSMiddleware, allow_origins=origins, allow_methods=["GET", "POST", "DELETE"],
-                           allow_headers=["Authorization", "X-API-Key", "Content-Type", "Idempotency-Key"],
-                           expose_headers=["Location", "Retry-After", "Link", "Idempotent-Replayed"])
+                           allow_headers=["Authorization", "X-API-Key", "Content-Type", "Idempotency-Key", HEADER],
+                           expose_headers=["Location", "Retry-After", "Link", "Idempotent-Replayed", HEADER])
     app.include_router(health.router)
     # every /v1 route: the caller's key (when keys are configured) and its rate
     dependencies = [Depends(caller)]
@@ -96,6 +101,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for router in (systems.router, jobs.router, ensembles.router, symbolic.router, maps.router, report.router,
                    pages.router, explore.router):
         app.include_router(router, dependencies=dependencies, responses=responses)
+    metrics.install(app, chosen)
+    tracing.instrument_app(app)  # only when the OTEL_* variables ask for traces
     app.mount(STATIC_URL, StaticFiles(packages=[("service", "static")]), name="static")
     _redoc(app)
     _secure(app)
@@ -127,11 +134,12 @@ def _redoc(app: FastAPI) -> None:
 
 
 def _secure(app: FastAPI) -> None:
-    """Security headers (:mod:`service.security`) on every answer, the 500s included: the middleware
-    wraps the whole stack, outside Starlette's ServerErrorMiddleware (``add_middleware`` would sit inside it)."""
+    """Security headers (:mod:`service.security`) and the request id (:mod:`service.request_id`) on every
+    answer, the 500s included: the middlewares wrap the whole stack, outside Starlette's
+    ServerErrorMiddleware (``add_middleware`` would sit inside it)."""
     docs = frozenset(p for p in (DOCS_URL, REDOC_URL, app.swagger_ui_oauth2_redirect_url) if p)
     build = app.build_middleware_stack
-    app.build_middleware_stack = lambda: SecurityHeaders(build(), docs)  # type: ignore[method-assign]  # wrap the stack
+    app.build_middleware_stack = lambda: RequestId(SecurityHeaders(build(), docs))  # type: ignore[method-assign]
 
 
 app = create_app()

@@ -104,6 +104,8 @@ def _env(extra: Mapping[str, str]) -> dict[str, str]:
         queue_database_url(extra.get("NONHOLONOMIC_QUEUE", "nonholonomic"))
     # the suite starts ~60 APIs, most never asked a symbolic question: their fork servers start on demand
     env["NONHOLONOMIC_SYMBOLIC_PRESTART"] = "false"
+    # a worker serves its metrics only where a test asks (many workers run at once: one port each)
+    env["NONHOLONOMIC_WORKER_METRICS_PORT"] = "0"
     env.update(extra)
     return env
 

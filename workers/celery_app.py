@@ -7,13 +7,19 @@ Start a worker with::
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from typing import Any
 
 from celery import Celery
 from celery.signals import (
+    after_setup_logger,
+    after_setup_task_logger,
+    before_task_publish,
     task_postrun,
+    task_prerun,
     task_received,
+    task_retry,
     task_revoked,
     worker_init,
     worker_process_init,
@@ -69,6 +75,12 @@ def make_app() -> Celery:
         # not all given back (bench/README.md, bench_user_potentials.py --worker)
         worker_max_memory_per_child=settings.worker_max_memory_mib * 1024 or None,
         worker_max_tasks_per_child=settings.worker_max_jobs or None,
+        # Task events (sent, received, started, succeeded, failed ...): Flower and celery-exporter see the work
+        worker_send_task_events=True,
+        task_send_sent_event=True,
+        # Soft shutdown (Celery >= 5.5): on a cold shutdown, running tasks get this long to end before their
+        # messages go back to the queue (Kubernetes: REMAP_SIGTERM=SIGQUIT, within the grace period)
+        worker_soft_shutdown_timeout=settings.worker_soft_shutdown_s,
     )
     return celery
 
@@ -96,6 +108,79 @@ def _beat(key: str, value: str) -> None:
     _heartbeats.append(Heartbeat(get_settings().redis_url or DEFAULT_REDIS_URL, key, lambda: value).start())
 
 
+_metrics_dir: list[Any] = []
+
+
+@worker_init.connect
+def _serve_metrics(**_: Any) -> None:
+    """The worker's metrics (:mod:`workers.metrics`): counted in files shared with the pool processes
+    (chosen here, before they fork), served from this process on ``worker_metrics_port``."""
+    port = get_settings().worker_metrics_port
+    if port:
+        from workers import metrics
+
+        _metrics_dir.append(metrics.use_multiprocess())
+        metrics.serve(port)
+
+
+@after_setup_logger.connect
+@after_setup_task_logger.connect
+def _log_format(logger: Any = None, **_: Any) -> None:
+    """The worker's lines in the service's format (:mod:`workers.logs`: JSON with the request and job ids)."""
+    from workers.logs import use_format
+
+    if logger is not None:
+        use_format(list(logger.handlers), get_settings().log_format)
+
+
+@before_task_publish.connect
+def _carry_request_id(headers: dict[str, Any] | None = None, **_: Any) -> None:
+    """The request id of the request that sends a task goes with it (its ``request_id`` header)."""
+    from workers.logs import REQUEST_ID, TASK_HEADER
+
+    request_id = REQUEST_ID.get()
+    if headers is not None and request_id and TASK_HEADER not in headers:
+        headers[TASK_HEADER] = request_id
+
+
+_context_tokens: dict[str, tuple[Any, Any]] = {}
+
+
+@task_prerun.connect
+def _task_started(task_id: str | None = None, task: Any = None, **_: Any) -> None:
+    """The task's request id and job id for its log lines; its start for its metrics."""
+    from workers import metrics
+    from workers.logs import JOB_ID, REQUEST_ID, TASK_HEADER
+
+    if task_id is None or task is None:
+        return
+    request = task.request
+    request_id = getattr(request, TASK_HEADER, None) or (request.headers or {}).get(TASK_HEADER)
+    _context_tokens[task_id] = (REQUEST_ID.set(request_id), JOB_ID.set(task_id))
+    metrics.task_started(task_id, task.name, bool((request.delivery_info or {}).get("redelivered")))
+
+
+@task_postrun.connect
+def _task_ended(task_id: str | None = None, task: Any = None, state: str | None = None, **_: Any) -> None:
+    from workers import metrics
+    from workers.logs import JOB_ID, REQUEST_ID
+
+    if task_id is None or task is None:
+        return
+    metrics.task_ended(task_id, task.name, state)
+    tokens = _context_tokens.pop(task_id, None)
+    if tokens is not None:
+        REQUEST_ID.reset(tokens[0])
+        JOB_ID.reset(tokens[1])
+
+
+@task_retry.connect
+def _task_retried(sender: Any = None, **_: Any) -> None:
+    from workers import metrics
+
+    metrics.task_retried(getattr(sender, "name", "unknown"))
+
+
 @worker_init.connect
 def _fingerprint_code(**_: Any) -> None:
     """The memo's fingerprints of the code as the main process loaded it, before the pool forks: a pool
@@ -115,6 +200,9 @@ def _warm_up(**_: Any) -> None:
     from workers.heartbeat import process_key
 
     _heartbeats.clear()  # copies of the main process's, inherited by the fork: not ours to stop
+    from workers.tracing import set_up
+
+    set_up("nonholonomic-worker")  # this process's own tracer provider (only when OTEL_* ask for traces)
     from workers.job_store import job_store
 
     if job_store.cache_info().currsize:  # the main process's engine, inherited: its connections are not ours
@@ -127,6 +215,9 @@ def _warm_up(**_: Any) -> None:
         from workers.jobs import warm_up
 
         warm_up()
+    from workers.metrics import note_memory
+
+    note_memory()
     _beat(process_key(), "warm")
 
 
@@ -147,7 +238,6 @@ def _open_job_store() -> None:
 def _announce(sender: Any = None, **_: Any) -> None:
     """The worker's name and queues, for ``/health`` (:mod:`workers.heartbeat`)."""
     import json
-    import os
 
     from workers.heartbeat import process_key, worker_key
     from workers.redelivery import Sweeper
@@ -157,6 +247,9 @@ def _announce(sender: Any = None, **_: Any) -> None:
     _beat(worker_key(), json.dumps({"name": sender.hostname, "queues": queues}))
     _sweepers.append(Sweeper([_sweep_tasks, _sweep_jobs, _sweep_ensembles]).start())
     if "prefork" not in type(sender.pool).__module__:  # solo or threads: jobs run in this process
+        from workers.tracing import set_up
+
+        set_up("nonholonomic-worker")
         if get_settings().warm_up:
             from workers.jobs import warm_up
 
@@ -165,7 +258,10 @@ def _announce(sender: Any = None, **_: Any) -> None:
 
 
 def _send_again(name: str, args: Any, kwargs: Any, task_id: str, queue: str) -> None:
+    from workers.metrics import sent_again
+
     app.send_task(name, args=args, kwargs=kwargs, task_id=task_id, queue=queue)
+    sent_again(name)
 
 
 def _sweep_tasks() -> None:
@@ -227,9 +323,12 @@ def _release_revoked(request: Any = None, **_: Any) -> None:
 
 
 @worker_process_shutdown.connect
-def _silence_process(**_: Any) -> None:
+def _silence_process(pid: int | None = None, **_: Any) -> None:
+    from workers.metrics import process_ended
+
     while _heartbeats:
         _heartbeats.pop().stop()
+    process_ended(pid or os.getpid())
 
 
 @worker_shutdown.connect
@@ -244,3 +343,7 @@ def _silence(**_: Any) -> None:
     release_owned(_redis(), worker_key())
     while _heartbeats:
         _heartbeats.pop().stop()
+    from workers.metrics import remove
+
+    while _metrics_dir:
+        remove(_metrics_dir.pop())

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Any
 
 from sqlalchemy.exc import OperationalError
 
@@ -23,6 +24,7 @@ from store.ensembles import EnsembleStore
 from workers.job_store import write_until_stored
 from workers.jobs import use_safety_cap
 from workers.limits import Deadline
+from workers.metrics import metrics
 
 #: Seconds between progress writes (and cancellation checks) of a running chunk.
 PROGRESS_INTERVAL_S = 0.2
@@ -86,7 +88,7 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
             system = request.definition()
             cells = run_cells(system, members, request.t_final, request.map_options(), progress)
             members_json, digests = [cell_to_json(system, c) for c in cells], [cell_digest(c) for c in cells]
-            write_until_stored(lambda: store.store_chunk(ensemble_id, chunk, members_json, digests, worker))
+            _store(store, ensemble_id, chunk, members_json, digests, worker)
             return "done"
         results = run_chunk(
             request.definition(), members, request.t_final, request.samples, checks=request.checks,
@@ -100,8 +102,19 @@ def run_ensemble_chunk(store: EnsembleStore, ensemble_id: str, chunk: int, worke
     except Exception as exc:  # noqa: BLE001 - the chunk's members fail with the reason, the ensemble goes on
         reason = f"the chunk failed: {type(exc).__name__}: {exc}"
         failed = [{"index": i, "status": "failed", "error": reason} for i in range(start, stop)]
-        write_until_stored(lambda: store.store_chunk(ensemble_id, chunk, failed, failed, worker))
+        _store(store, ensemble_id, chunk, failed, failed, worker)
         return "failed"
     members_json, digests = [member_to_json(m) for m in results], [digest(m) for m in results]
-    write_until_stored(lambda: store.store_chunk(ensemble_id, chunk, members_json, digests, worker))
+    _store(store, ensemble_id, chunk, members_json, digests, worker)
     return "done"
+
+
+def _store(store: EnsembleStore, ensemble_id: str, chunk: int, members: list[dict[str, Any]],
+           digests: list[Any], worker: str) -> None:
+    """Store the chunk's results (until the database takes them); its members are counted in the metrics
+    only by the run whose results were kept (:meth:`store.ensembles.EnsembleStore.store_chunk`)."""
+    kept: list[bool] = []
+    write_until_stored(lambda: kept.append(bool(store.store_chunk(ensemble_id, chunk, members, digests, worker))))
+    if kept and kept[-1]:
+        for member in members:
+            metrics().members_finished.labels(str(member.get("status", "unknown"))).inc()

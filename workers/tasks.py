@@ -18,6 +18,7 @@ from workers.ensembles import ENSEMBLE_CHUNK, run_ensemble_chunk
 from workers.job_store import ensemble_store, job_store, write_until_stored
 from workers.jobs import InvalidJob, run_job
 from workers.limits import Deadline, JobTimeout, hard_limit_message, log_thread_stacks, soft_limit_message
+from workers.metrics import job_finished, job_kind
 
 #: Seconds between progress updates (and cancellation checks) of a running job.
 PROGRESS_INTERVAL_S = 0.2
@@ -74,9 +75,12 @@ def _best_effort(task: Task, state: str, meta: dict[str, Any] | None = None) -> 
 
 
 def _record_end(job_id: str, status: str, result: dict[str, Any] | None = None,
-                error: dict[str, str] | None = None) -> None:
-    """Write the job's end to the store, retrying while the database is away."""
-    write_until_stored(lambda: job_store().finish(job_id, status, result=result, error=error))
+                error: dict[str, str] | None = None) -> bool:
+    """Write the job's end to the store, retrying while the database is away; True if recorded (False: the
+    job had ended already, e.g. run again elsewhere while this worker was cut off, or was cancelled)."""
+    recorded: list[bool] = []
+    write_until_stored(lambda: recorded.append(job_store().finish(job_id, status, result=result, error=error)))
+    return bool(recorded and recorded[-1])
 
 
 class _JobTask(Task):
@@ -86,7 +90,10 @@ class _JobTask(Task):
     def on_failure(self, exc: BaseException, task_id: str, args: Any, kwargs: Any, einfo: Any) -> None:
         if isinstance(exc, TimeLimitExceeded):
             exc = JobTimeout(hard_limit_message(get_settings().job_time_limit_s))
-        _record_end(task_id, "failed", error={"type": type(exc).__name__, "message": str(exc)})
+        if _record_end(task_id, "failed", error={"type": type(exc).__name__, "message": str(exc)}):
+            request, _ = request_from_args(args, kwargs)
+            job_finished(request, "failed")
+        log.info("job ended: failed", extra={"job_id": task_id, "error": type(exc).__name__})
 
 
 @app.task(bind=True, base=_JobTask, name="nonholonomic.simulate")
@@ -124,7 +131,12 @@ def simulate_job(self: Task, *args: Any, **kwargs: Any) -> dict[str, Any]:
     except SoftTimeLimitExceeded:
         log_thread_stacks(log, f"job {job_id} past its soft time limit")
         raise JobTimeout(soft_limit_message(get_settings().job_soft_time_limit_s)) from None
-    _record_end(job_id, "succeeded", result=result)
+    if _record_end(job_id, "succeeded", result=result):
+        job_finished(request, "succeeded")  # counted once: not by a late run whose end the store refused
+        log.info("job ended: succeeded", extra={"job_id": job_id, "kind": job_kind(request)})
+    else:
+        log.info("job ended: succeeded, but it had ended already; this run's result was not kept",
+                 extra={"job_id": job_id, "kind": job_kind(request)})
     return {"status": "succeeded"}
 
 

@@ -42,6 +42,7 @@ import heyoka as hy
 import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
+from nonholonomic.numerics import tally
 from nonholonomic.numerics.kernels import numeric
 from nonholonomic.numerics.reduced_time import DensityQuadrature, ReducedTimeReport
 from nonholonomic.numerics.taylor import TaylorSystem, taylor_system
@@ -307,8 +308,11 @@ def integrate(
                 or not np.all(np.isfinite(grid))):
             raise ValueError("times must be finite, non-decreasing, start at 0 and have at least 2 entries")
     if engine == "heyoka":
-        return _integrate_heyoka(system, p, y0, grid, tolerance or MACHINE_EPSILON, progress)
-    return _integrate_scipy(system, p, y0, grid, tolerance or 1e-12, progress)
+        trajectory = _integrate_heyoka(system, p, y0, grid, tolerance or MACHINE_EPSILON, progress)
+    else:
+        trajectory = _integrate_scipy(system, p, y0, grid, tolerance or 1e-12, progress)
+    tally.count(integrations=1)
+    return trajectory
 
 
 class _Segments:

@@ -16,7 +16,7 @@ import heyoka as hy
 import numpy as np
 
 from nonholonomic.definition import MechanicalSystem
-from nonholonomic.numerics import integration  # FIRST_SEGMENT_STEPS read at run time (tests change it)
+from nonholonomic.numerics import integration, tally  # FIRST_SEGMENT_STEPS read at run time (tests change it)
 from nonholonomic.numerics.integration import (
     _GOING,
     MACHINE_EPSILON,
@@ -119,6 +119,7 @@ def integrate_batch(
     run.finish(results)
     filled = [r for r in results if r is not None]
     assert len(filled) == len(results)  # every member's slot is filled by members() or finish()
+    tally.count(integrations=sum(isinstance(r, Trajectory) for r in filled))
     return filled
 
 

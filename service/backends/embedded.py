@@ -18,6 +18,7 @@ under it each time) is quarantined as failed at the next start, not run again.
 
 from __future__ import annotations
 
+import contextvars
 import ctypes
 import logging
 import threading
@@ -38,6 +39,8 @@ from store.jobs import ActiveBoundReached, JobStore, StoredJob
 from workers.ensembles import run_ensemble_chunk
 from workers.jobs import WarmUp, run_job, warm_up
 from workers.limits import Deadline, JobTimeout, log_thread_stacks, soft_limit_message
+from workers.logs import JOB_ID
+from workers.metrics import job_finished
 
 log = logging.getLogger(__name__)
 #: Seconds between two looks of the watchdog at the running jobs' time limits.
@@ -129,7 +132,9 @@ class EmbeddedBackend:
         with self._lock:
             self._cancel[job_id] = threading.Event()
             self._progress[job_id] = 0.0
-        self._pool.submit(self._run, job_id)
+        context = contextvars.copy_context()  # the submitting request's id goes with the job's log lines
+        context.run(JOB_ID.set, job_id)
+        self._pool.submit(context.run, self._run, job_id)
 
     def submit(self, request: dict[str, Any], owner: str | None = None,
                max_active: int | None = None, binding: KeyBinding | None = None) -> JobRecord:
@@ -186,7 +191,8 @@ class EmbeddedBackend:
         except Exception as exc:  # reported to the client as the job's error
             end = {"status": "failed", "error": {"type": type(exc).__name__, "message": str(exc)}}
         if end is not None and not running.abandoned:  # an abandoned job has failed already
-            self.store.finish(job_id, **end)
+            if self.store.finish(job_id, **end):
+                job_finished(stored.request, end["status"])
         self._forget(job_id)
 
     def _leave(self, running: _Running) -> None:
@@ -261,8 +267,10 @@ class EmbeddedBackend:
         return ensemble_id, created_at
 
     def _enqueue_chunk(self, ensemble_id: str, chunk: int) -> None:
-        self._pool.submit(run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded", self._closing.is_set,
-                          self._soft_limit_s)
+        context = contextvars.copy_context()
+        context.run(JOB_ID.set, ensemble_id)
+        self._pool.submit(context.run, run_ensemble_chunk, self.ensembles, ensemble_id, chunk, "embedded",
+                          self._closing.is_set, self._soft_limit_s)
 
     def cancel_ensemble(self, ensemble_id: str) -> None:
         self.ensembles.cancel(ensemble_id)

@@ -18,6 +18,7 @@ from schemas.ensembles import (
 )
 from schemas.job_list import DEFAULT_LIMIT, MAX_LIMIT, STATUSES
 from schemas.problems import CONFLICT, FieldError
+from service import metrics
 from service.access import ensemble_of
 from service.admission import admit_ensemble
 from service.backends.base import InvalidCursor, decode_cursor, encode_cursor
@@ -243,4 +244,5 @@ def cancel_ensemble(ensemble_id: str, backend: Backend, owner: Owner) -> JSONRes
         raise ProblemError(409, "Ensemble already finished", f"ensemble {ensemble_id} already {before['status']}",
                            CONFLICT)
     backend.cancel_ensemble(ensemble_id)
+    metrics.ENSEMBLES_CANCELLED.inc()
     return JSONResponse(view(ensemble_id, ensemble_of(backend, owner, ensemble_id)), status_code=202)

@@ -182,3 +182,12 @@ async def health(request: Request) -> JSONResponse:
             **{k: v for k, v in parts.items() if k != "ok"}, "age_s": round(age, 3),
             "symbolic": state.symbolic_pool.status()}
     return JSONResponse(body, status_code=200 if parts["ok"] else 503)
+
+
+@router.get("/health/live", operation_id="health-live", summary="The API process answers (for probes)",
+            responses={200: {"content": {"application/json": {"example": {"status": "ok"}}}}})
+async def live() -> dict[str, str]:
+    """200 as long as this process's event loop answers: for a container's liveness and readiness probes.
+    Unlike ``/health`` it does not ask the broker, the store or the workers: an API whose workers scaled to
+    zero (no warm worker: ``/health`` is 503) must still take the submissions that wake them."""
+    return {"status": "ok"}

@@ -14,6 +14,7 @@ from schemas.job_list import DEFAULT_LIMIT, MAX_LIMIT, STATUSES, JobList, JobLis
 from schemas.jobs import JobAccepted, JobRequest, JobView
 from schemas.problems import CONFLICT, NOT_FOUND, FieldError
 from schemas.results import TrajectoryExport
+from service import metrics
 from service.access import job_of
 from service.admission import admit_job
 from service.backends import JobRecord
@@ -228,6 +229,8 @@ def cancel_job(job_id: str, backend: Backend, owner: Owner) -> JSONResponse:
     after = backend.cancel(job_id)
     if after is None:
         raise ProblemError(404, "Unknown job", f"no job with id {job_id!r}", NOT_FOUND)
+    if after.status == "cancelled":
+        metrics.cancelled(after.request)
     return JSONResponse(_view(after), status_code=202)
 
 

@@ -138,3 +138,11 @@ def test_postgresql_holds_the_jobs_and_both_processes_use_it():
             and url.endswith("@postgres:5432/nonholonomic"))
     for name in ("api", "worker"):
         assert compose["services"][name]["depends_on"]["postgres"]["condition"] == "service_healthy"
+
+
+def test_workers_expose_their_metrics_port_and_log_json():
+    worker = _compose()["services"]["worker"]
+    env = worker["environment"]
+    port = Settings(worker_metrics_port=int(env["NONHOLONOMIC_WORKER_METRICS_PORT"])).worker_metrics_port
+    assert port > 0 and str(port) in worker["expose"] and env["NONHOLONOMIC_LOG_FORMAT"] == "json"
+    assert "9191" not in str(worker.get("ports", []))  # not published on the host

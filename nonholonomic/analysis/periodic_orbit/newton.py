@@ -38,6 +38,7 @@ import sympy as sp
 from nonholonomic.analysis.lyapunov.variational import _integrator
 from nonholonomic.analysis.poincare.surface import parse_surface
 from nonholonomic.definition import MechanicalSystem
+from nonholonomic.numerics import tally
 from nonholonomic.numerics.integration import IntegrationCancelled, IntegrationError
 from nonholonomic.numerics.kernels import VectorKernel, numeric, vectorize
 from nonholonomic.numerics.taylor import taylor_system
@@ -131,6 +132,7 @@ def flow(system: MechanicalSystem, p: np.ndarray, x0: np.ndarray, t: float, tole
         raise IntegrationError(f"heyoka stopped at t = {ta.time:g} of {t:g} with outcome {outcome.name}")
     partials = state[n: n + n * (n + k)].reshape(n, n + k)
     dx_dlambda = None if not k or dpars is None else partials[:, n:] @ dpars
+    tally.count(integrations=1)
     return Flow(state[:n].copy(), partials[:, :n].copy(), float(state[-1]), int(steps), dx_dlambda)
 
 

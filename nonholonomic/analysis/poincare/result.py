@@ -23,6 +23,7 @@ import numpy as np
 
 from nonholonomic.analysis.poincare.request import _Request
 from nonholonomic.analysis.poincare.surface import _scale
+from nonholonomic.numerics import tally
 from nonholonomic.numerics.integration import MACHINE_EPSILON
 
 #: The Newton correction of a crossing time is accepted up to this many ``eps·max(|t|, h_max)``.
@@ -88,6 +89,7 @@ def _finish(req: _Request, runtime: np.ndarray, y0: np.ndarray, t: np.ndarray, r
             stopped_early: bool, steps: int, start: float, wall_share: float = 1.0) -> Section:
     """The :class:`Section` of the crossings ``t, raw`` (rows: the integrator's state at each) from
     ``y0``; ``runtime``: the member's runtime parameters (:meth:`TaylorSystem.runtime_parameters`)."""
+    tally.count(integrations=1, crossings=len(t))
     system = req.system
     kernels = req.prep.kernels
     n = kernels.n
