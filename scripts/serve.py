@@ -45,6 +45,7 @@ def main(argv: list[str]) -> None:
     if env.get("NONHOLONOMIC_CACHE_DIR", "").lower() != "off" and not any(memo.glob("*.memo")):
         say(f"first start: every system is derived and compiled once (about a minute on 2 cores; GET /health "
             f"says how far), then kept in {memo} for the next starts")
+    env.setdefault("NONHOLONOMIC_LOG_FORMAT", "text")  # a terminal's plain lines (deployments log JSON)
     shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
     base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{args.port}"
     say(f"API on {base} (listening on {args.host}:{args.port}); docs at {base}/docs; Ctrl-C stops it")

@@ -89,7 +89,8 @@ class StateCollector(Collector):
         try:
             found = list(families())
         except Exception as exc:  # noqa: BLE001 - an outage: the rest of the scrape still answers
-            log.warning("metrics: %s not read (%s: %s)", what, type(exc).__name__, str(exc).splitlines()[0:1])
+            first_line = next(iter(str(exc).splitlines()), "")
+            log.warning("metrics: %s not read (%s: %s)", what, type(exc).__name__, first_line)
             return
         yield from found
 

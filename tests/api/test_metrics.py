@@ -168,3 +168,16 @@ def test_a_json_log_line_names_its_request_and_job():
     assert line["message"] == "job submitted" and line["level"] == "INFO"
     assert line["request_id"] == "r-1" and line["job_id"] == "j-1" and line["kind"] == "chaplygin_ball"
     assert line["time"].endswith("+00:00")
+
+
+def test_a_store_that_cannot_be_read_leaves_its_gauges_out_and_the_scrape_answers(client, monkeypatch, caplog):
+    def away() -> dict[str, int]:
+        raise ConnectionError("the database is away\nsecond line")
+
+    monkeypatch.setattr(client.app.state.backend.store, "count_by_status", away)
+    with caplog.at_level(logging.WARNING, logger="service.metrics"):
+        found = samples(client)
+    names = {name for name, _ in found}
+    assert "nonholonomic_jobs" not in names and "nonholonomic_active_jobs" not in names
+    assert "nonholonomic_symbolic_pool_size" in names and "nonholonomic_queue_depth" in names
+    assert "metrics: the store not read (ConnectionError: the database is away)" in caplog.text
