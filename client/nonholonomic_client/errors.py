@@ -43,6 +43,9 @@ class ApiError(Exception):
         The whole problem document as received (or built).
     retry_after : float or None
         Seconds the service asked to wait before retrying (``Retry-After`` of a 429 or 503).
+    request_id : str or None
+        The answer's ``X-Request-ID``: quote it to the service's operator, whose logs carry it on every
+        line of the request and of its job.
 
     Examples
     --------
@@ -59,6 +62,7 @@ class ApiError(Exception):
         self.title: str = str(self.problem.get("title") or "Error")
         self.detail: str = str(self.problem.get("detail") or "")
         self.retry_after: float | None = None
+        self.request_id: str | None = None
         raw = self.problem.get("errors") or []
         self.errors: list[dict[str, str]] = [
             {"field": str(e.get("field", "")), "reason": str(e.get("reason", ""))} if isinstance(e, dict)
@@ -107,6 +111,7 @@ class ApiError(Exception):
                                                   f"{response.status_code} without a body"})
         retry = response.headers.get("retry-after", "")
         error.retry_after = float(retry) if retry.isdigit() else None
+        error.request_id = response.headers.get("x-request-id")
         return error
 
     @classmethod

@@ -18,6 +18,7 @@ import pytest
 from fastapi.testclient import TestClient
 from prometheus_client.parser import text_string_to_metric_families
 
+from nonholonomic_client.errors import ApiError
 from schemas.settings import get_settings
 from service.main import create_app
 from tests.api.conftest import job
@@ -145,8 +146,9 @@ def test_every_answer_carries_the_request_id_given_or_made(client):
     for bad in ("a b", "x" * 129, 'q"}{'):
         echoed = client.get("/health", headers={"X-Request-ID": bad}).headers["x-request-id"]
         assert echoed != bad and len(echoed) == 32
-    # errors carry it too: a 404 problem and a 422
-    assert client.get("/v1/jobs/nope", headers={"X-Request-ID": "e1"}).headers["x-request-id"] == "e1"
+    # errors carry it too: a 404 problem and a 422; the Python client's ApiError keeps it to quote
+    missing = client.get("/v1/jobs/nope", headers={"X-Request-ID": "e1"})
+    assert missing.headers["x-request-id"] == "e1" and ApiError.from_response(missing).request_id == "e1"
     assert client.post("/v1/jobs", json={}, headers={"X-Request-ID": "e2"}).headers["x-request-id"] == "e2"
 
 
