@@ -62,7 +62,17 @@ def formatter(log_format: str) -> logging.Formatter:
     ``extra``) or plain text."""
     if log_format == "json":
         return JsonFormatter(_FIELDS, rename_fields=_RENAMED, timestamp="time", json_ensure_ascii=False)
-    return logging.Formatter("%(asctime)s %(levelname)s %(name)s [%(request_id)s %(job_id)s] %(message)s")
+    return _TextFormatter("%(asctime)s %(levelname)s %(name)s %(ids)s%(message)s")
+
+
+class _TextFormatter(logging.Formatter):
+    """Plain lines, the request and job ids in brackets where there are any."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        ids = [f"{name}={value}" for name in ("request_id", "job_id")
+               if (value := getattr(record, name, None))]
+        record.ids = f"[{' '.join(ids)}] " if ids else ""
+        return super().format(record)
 
 
 def use_format(handlers: list[logging.Handler], log_format: str) -> None:

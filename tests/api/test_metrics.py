@@ -183,3 +183,11 @@ def test_a_store_that_cannot_be_read_leaves_its_gauges_out_and_the_scrape_answer
     assert "nonholonomic_jobs" not in names and "nonholonomic_active_jobs" not in names
     assert "nonholonomic_symbolic_pool_size" in names and "nonholonomic_queue_depth" in names
     assert "metrics: the store not read (ConnectionError: the database is away)" in caplog.text
+
+
+def test_a_text_log_line_names_its_ids_only_where_there_are_any():
+    record = logging.LogRecord("service.x", logging.INFO, __file__, 1, "job submitted", None, None)
+    ContextFilter().filter(record)
+    assert formatter("text").format(record).endswith(" INFO service.x job submitted")
+    record.request_id, record.job_id = "r-2", "j-2"
+    assert formatter("text").format(record).endswith(" INFO service.x [request_id=r-2 job_id=j-2] job submitted")
