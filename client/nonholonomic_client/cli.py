@@ -131,6 +131,8 @@ def _report(exc: ApiError) -> None:
             _say(f"  {e['field']}: {e['reason']}")
     else:
         _say(f"error: {exc.title}: {exc.detail}" if exc.detail else f"error: {exc.title}")
+    if (exc.status or 0) >= 500 and exc.request_id:  # the service's fault: the id finds it in its logs
+        _say(f"  request id: {exc.request_id} (the service's logs carry it)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

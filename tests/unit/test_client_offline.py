@@ -219,6 +219,12 @@ def test_cli_exit_codes_for_a_failed_job_and_a_server_error(tmp_path, capsys, mo
                    "detail": "KeyError: the server failed; this is a bug"}))
     assert main(["--url", "http://api", "systems"]) == 3
     assert capsys.readouterr().err == "error: Internal error: KeyError: the server failed; this is a bug\n"
+    _cli_against(monkeypatch, lambda request: httpx.Response(
+        503, headers={"X-Request-ID": "r-503"},
+        json={"type": "/problems/unavailable", "title": "Unavailable", "status": 503, "detail": "no broker"}))
+    assert main(["--url", "http://api", "systems"]) == 3
+    assert capsys.readouterr().err == ("error: Unavailable: no broker\n"
+                                       "  request id: r-503 (the service's logs carry it)\n")
 
     _cli_against(monkeypatch, lambda request: httpx.Response(
         422, json={"type": "/problems/invalid-request", "title": "Invalid request", "status": 422,
