@@ -36,6 +36,7 @@ from fastapi import Request
 
 from schemas.problems import CONFLICT, NOT_FOUND, RATE_LIMITED, UNAUTHORIZED
 from schemas.settings import Settings
+from service import metrics
 from service.errors import ProblemError
 from store.listing import is_prefix
 
@@ -187,6 +188,7 @@ class Access:
             wait = self.failures.wait_s(address)
             if wait > 0:  # a key new to this address, right or wrong, answers alike: a guess tells nothing
                 retry = max(1, math.ceil(wait))
+                metrics.refused("unknown_keys")
                 raise ProblemError(429, "Too many unknown keys", f"this address sent more than "
                                    f"{self.failures.per_minute} unknown API keys in a minute; retry after {retry} s "
                                    "(keys already used from this address are served meanwhile)",
@@ -201,6 +203,7 @@ class Access:
             wait = self.limiter.wait_s(owner)
             if wait > 0:
                 retry = max(1, math.ceil(wait))
+                metrics.refused("rate_limited")
                 raise ProblemError(429, "Rate limit", f"this key may make {self.limiter.per_minute} requests a "
                                    f"minute; retry after {retry} s", RATE_LIMITED, headers={"Retry-After": str(retry)})
         return owner

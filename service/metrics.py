@@ -6,7 +6,8 @@
   API process);
 * read at each scrape: jobs in the store by status (``nonholonomic_jobs``), active jobs, the queue's depth,
   workers with a live heartbeat, the symbolic pool's use;
-* in embedded mode, where this process runs the jobs, also the workers' metrics (:mod:`workers.metrics`).
+* in embedded mode, where this process runs the jobs, also the work's (:mod:`workers.metrics`): jobs and
+  members ended, integrations, crossings, memory (the task metrics are Celery's: none here).
 
 A Celery worker serves its own (:mod:`workers.metrics`, port ``NONHOLONOMIC_WORKER_METRICS_PORT``).
 ``/metrics`` asks for an API key like every ``/v1`` route when keys are on. One uvicorn process per API
@@ -26,7 +27,6 @@ from prometheus_client.registry import Collector
 from prometheus_fastapi_instrumentator import Instrumentator, metrics as instrumentator_metrics
 
 from schemas.settings import Settings
-from service.access import caller
 from workers.metrics import add_tally, job_kind, note_memory
 
 log = logging.getLogger(__name__)
@@ -41,8 +41,8 @@ JOBS_SUBMITTED = Counter("nonholonomic_jobs_submitted", "Jobs accepted (202) by 
 ENSEMBLES_SUBMITTED = Counter("nonholonomic_ensembles_submitted", "Ensembles accepted (202) by this API", ["kind"])
 JOBS_CANCELLED = Counter("nonholonomic_jobs_cancelled", "Jobs cancelled through this API", ["kind"])
 ENSEMBLES_CANCELLED = Counter("nonholonomic_ensembles_cancelled", "Ensembles cancelled through this API")
-ADMISSION_REFUSALS = Counter("nonholonomic_admission_refusals", "Requests refused by admission control (429/503)",
-                             ["reason"])
+ADMISSION_REFUSALS = Counter("nonholonomic_admission_refusals",
+                             "Requests refused by admission and rate limits (429/503)", ["reason"])
 
 
 def submitted(request: dict[str, Any]) -> None:
@@ -58,7 +58,8 @@ def cancelled(request: dict[str, Any]) -> None:
 
 
 def refused(reason: str) -> None:
-    """An admission refusal: ``too_many_jobs``, ``queue_full`` or ``symbolic_pool_busy``."""
+    """A refusal: ``too_many_jobs``, ``queue_full`` (429), ``symbolic_pool_busy`` (503), ``rate_limited`` (a
+    key past its requests a minute) or ``unknown_keys`` (an address sending unknown keys)."""
     ADMISSION_REFUSALS.labels(reason).inc()
 
 
@@ -96,7 +97,7 @@ class StateCollector(Collector):
 
 
 def _store_families(backend: Any) -> Iterator[GaugeMetricFamily]:
-    counts = backend.store.count_by_status()
+    counts = backend.job_counts()
     jobs = GaugeMetricFamily("nonholonomic_jobs", "Jobs in the store, by status", labels=["status"])
     for status in ("queued", "running", "succeeded", "failed", "cancelled"):
         jobs.add_metric([status], counts.get(status, 0))
@@ -108,26 +109,23 @@ def _store_families(backend: Any) -> Iterator[GaugeMetricFamily]:
 def _queue_families(backend: Any, settings: Settings) -> Iterator[GaugeMetricFamily]:
     depth = GaugeMetricFamily("nonholonomic_queue_depth", "Messages (jobs and ensemble chunks) waiting in the queue",
                               labels=["queue"])
-    depth.add_metric([settings.queue], backend.queued_messages())
+    depth.add_metric([settings.queue], backend.queue_depth())
     yield depth
-    client = backend.redis
-    if client is not None:
-        from workers.heartbeat import census
-
-        workers = [w for w in census(client).values() if settings.queue in w["queues"]]
+    alive = backend.live_workers()
+    if alive is not None:
         yield GaugeMetricFamily("nonholonomic_workers_alive", "Workers with a live heartbeat serving the queue",
-                                value=len(workers))
-        yield GaugeMetricFamily("nonholonomic_workers_warm_processes", "Warm pool processes of those workers",
-                                value=sum(w["warm_processes"] for w in workers))
+                                value=alive)
 
 
 def install(app: FastAPI, settings: Settings) -> None:
     """Count the requests and serve ``GET /metrics`` (unless ``settings.metrics`` is off)."""
     if not settings.metrics:
         return
+    from service.access import caller  # here: access counts its refusals in this module
+
     registry = CollectorRegistry()  # this app's: several apps in one process (tests) do not collide
-    instrumentator = Instrumentator(should_group_status_codes=False, excluded_handlers=[METRICS_URL, "/health/live"],
-                                    registry=registry)
+    instrumentator = Instrumentator(should_group_status_codes=False,
+                                    excluded_handlers=[f"^{METRICS_URL}$", "^/health/live$"], registry=registry)
     instrumentator.add(instrumentator_metrics.requests(registry=registry),
                        instrumentator_metrics.latency(registry=registry, buckets=LATENCY_BUCKETS))
     instrumentator.instrument(app)
@@ -140,7 +138,7 @@ def install(app: FastAPI, settings: Settings) -> None:
     def metrics_text(request: Request) -> Response:
         """The API's metrics in Prometheus' text format: requests by route and status, jobs and ensembles
         submitted and cancelled, admission refusals, the store's jobs by status, the queue's depth, the live
-        workers, the symbolic pool (and in embedded mode the work's: tasks, integrations, crossings)."""
+        workers, the symbolic pool (and in embedded mode the work's: jobs ended, integrations, crossings)."""
         if request.app.state.settings.embedded:  # this process runs the jobs
             add_tally()
             note_memory()

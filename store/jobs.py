@@ -411,10 +411,13 @@ class JobStore:
             return int(session.scalar(select(func.count()).select_from(JobRow)
                                       .where(JobRow.owner == owner, JobRow.status.in_(ACTIVE))) or 0)
 
-    def count_by_status(self) -> dict[str, int]:
-        """Jobs in the store by status (one indexed ``GROUP BY``; for the metrics)."""
-        with self._session() as session:
-            rows = session.execute(select(JobRow.status, func.count()).group_by(JobRow.status))
+    def count_by_status(self, engine: Engine | None = None, timeout_ms: int | None = None) -> dict[str, int]:
+        """Jobs in the store by status (one indexed ``GROUP BY``; for the metrics), on ``engine``'s
+        connections if given (a scrape's own, with a connect timeout), within ``timeout_ms`` on PostgreSQL."""
+        with (engine or self.engine).connect() as connection:
+            if timeout_ms is not None and connection.dialect.name == "postgresql":
+                connection.execute(text(f"SET LOCAL statement_timeout = {int(timeout_ms)}"))
+            rows = connection.execute(select(JobRow.status, func.count()).group_by(JobRow.status))
             return {str(status): int(n) for status, n in rows}
 
     def session(self) -> Session:

@@ -16,6 +16,7 @@ from celery.signals import (
     after_setup_logger,
     after_setup_task_logger,
     before_task_publish,
+    task_failure,
     task_postrun,
     task_prerun,
     task_received,
@@ -102,10 +103,22 @@ def _redis() -> Any:
     return redis.Redis.from_url(get_settings().redis_url or DEFAULT_REDIS_URL, socket_timeout=5)
 
 
-def _beat(key: str, value: str) -> None:
+def _beat(key: str, value: str, measure: bool = False) -> None:
+    """A heartbeat under ``key``; with ``measure``, each beat (every 3 s) also samples this process's
+    resident memory for its metrics, during a job too."""
     from workers.heartbeat import Heartbeat
 
-    _heartbeats.append(Heartbeat(get_settings().redis_url or DEFAULT_REDIS_URL, key, lambda: value).start())
+    def beat() -> str:
+        if measure:
+            from workers.metrics import note_memory
+
+            try:
+                note_memory()
+            except Exception:  # noqa: BLE001 - a metric never stops the heartbeat
+                pass
+        return value
+
+    _heartbeats.append(Heartbeat(get_settings().redis_url or DEFAULT_REDIS_URL, key, beat).start())
 
 
 _metrics_dir: list[Any] = []
@@ -160,6 +173,14 @@ def _task_started(task_id: str | None = None, task: Any = None, **_: Any) -> Non
     metrics.task_started(task_id, task.name, bool((request.delivery_info or {}).get("redelivered")))
 
 
+@task_failure.connect
+def _task_raised(task_id: str | None = None, exception: BaseException | None = None, **_: Any) -> None:
+    from workers import metrics
+
+    if task_id is not None and exception is not None:
+        metrics.job_failed_in_task(task_id, exception)
+
+
 @task_postrun.connect
 def _task_ended(task_id: str | None = None, task: Any = None, state: str | None = None, **_: Any) -> None:
     from workers import metrics
@@ -167,11 +188,13 @@ def _task_ended(task_id: str | None = None, task: Any = None, state: str | None 
 
     if task_id is None or task is None:
         return
-    metrics.task_ended(task_id, task.name, state)
     tokens = _context_tokens.pop(task_id, None)
-    if tokens is not None:
-        REQUEST_ID.reset(tokens[0])
-        JOB_ID.reset(tokens[1])
+    try:
+        metrics.task_ended(task_id, task.name, state)
+    finally:  # the next task's lines never carry this one's ids
+        if tokens is not None:
+            REQUEST_ID.reset(tokens[0])
+            JOB_ID.reset(tokens[1])
 
 
 @task_retry.connect
@@ -215,10 +238,7 @@ def _warm_up(**_: Any) -> None:
         from workers.jobs import warm_up
 
         warm_up()
-    from workers.metrics import note_memory
-
-    note_memory()
-    _beat(process_key(), "warm")
+    _beat(process_key(), "warm", measure=True)
 
 
 def _open_job_store() -> None:
@@ -254,7 +274,7 @@ def _announce(sender: Any = None, **_: Any) -> None:
             from workers.jobs import warm_up
 
             warm_up()
-        _beat(process_key(os.getpid()), "warm")
+        _beat(process_key(os.getpid()), "warm", measure=True)
 
 
 def _send_again(name: str, args: Any, kwargs: Any, task_id: str, queue: str) -> None:

@@ -42,7 +42,9 @@ class WorkMetrics:
 
     #: ``nonholonomic_task_duration_seconds{task,status}``: a task's run in a worker.
     task_duration: Histogram
-    #: ``nonholonomic_tasks_total{task,status}``: status ``succeeded``, ``failed`` (raised) or ``retried``.
+    #: ``nonholonomic_tasks_total{task,status}``: ``succeeded``; ``job_failed`` (the job's own failure: its
+    #: integration, its request, its time limit); ``failed`` (anything else raised: a bug, the database away);
+    #: ``retried``; ``ignored`` (a message delivered again for a job that ended, was cancelled or quarantined).
     tasks: Counter
     #: ``nonholonomic_task_redeliveries_total{task,source}``: ``broker`` (the message came back
     #: redelivered) or ``sweeper`` (a live worker sent a dead or cut-off worker's task again).
@@ -57,9 +59,18 @@ class WorkMetrics:
     crossings: Counter
 
 
-@lru_cache(maxsize=1)
+_made_lock = threading.Lock()
+
+
 def metrics() -> WorkMetrics:
-    """The metrics, made once per process (after :func:`use_multiprocess` in a worker)."""
+    """The metrics, made once per process (after :func:`use_multiprocess` in a worker; under a lock: two
+    threads making them at once would register each name twice)."""
+    with _made_lock:
+        return _make()
+
+
+@lru_cache(maxsize=1)
+def _make() -> WorkMetrics:
     return WorkMetrics(
         task_duration=Histogram("nonholonomic_task_duration_seconds", "Celery task run time in a worker",
                                 ["task", "status"], buckets=DURATION_BUCKETS),
@@ -73,20 +84,29 @@ def metrics() -> WorkMetrics:
     )
 
 
-@lru_cache(maxsize=1)
 def resident_memory() -> Gauge:
     """``nonholonomic_worker_resident_memory_bytes{pid}``: each live pool process's resident memory (made
     only in the processes that run work: the worker's main process has no series)."""
+    with _made_lock:
+        return _make_memory()
+
+
+@lru_cache(maxsize=1)
+def _make_memory() -> Gauge:
     return Gauge("nonholonomic_worker_resident_memory_bytes", "Resident memory of a pool process",
                  multiprocess_mode="liveall")
 
 
 def job_kind(request: dict[str, Any]) -> str:
-    """A job's kind for its metrics: the system's kind, or the job's (``paper_report``)."""
+    """A job's kind for its metrics: the system's kind if it is one of the catalog's, ``paper_report``, or
+    ``other`` (a label takes few values: a message sent straight to the broker may name anything)."""
+    from nonholonomic.systems import KINDS
+
     system = request.get("system")
-    if isinstance(system, dict) and isinstance(system.get("kind"), str):
-        return str(system["kind"])[:64]
-    return str(request.get("job") or "unknown")[:64]
+    if isinstance(system, dict):
+        kind = system.get("kind")
+        return kind if isinstance(kind, str) and kind in KINDS else "other"
+    return "paper_report" if request.get("job") == "paper_report" else "other"
 
 
 def job_finished(request: dict[str, Any], status: str) -> None:
@@ -100,15 +120,15 @@ _tally_seen = [0, 0]
 def add_tally() -> None:
     """Move what the core counted since the last call (:func:`nonholonomic.numerics.tally.totals`) into
     the integration and crossing counters."""
-    integrations, crossings = tally.totals()
-    with _tally_lock:
+    with _tally_lock:  # read and moved at once: two scrapes (or tasks) would otherwise move a count twice
+        integrations, crossings = tally.totals()
         new = integrations - _tally_seen[0], crossings - _tally_seen[1]
         _tally_seen[:] = [integrations, crossings]
-    m = metrics()
-    if new[0]:
-        m.integrations.inc(new[0])
-    if new[1]:
-        m.crossings.inc(new[1])
+        m = metrics()
+        if new[0]:
+            m.integrations.inc(new[0])
+        if new[1]:
+            m.crossings.inc(new[1])
 
 
 def resident_memory_bytes() -> int:
@@ -149,13 +169,38 @@ def serve(port: int, address: str = "0.0.0.0") -> bool:  # noqa: S104 - scraped 
     """Serve the worker's metrics (every process's, added up) on ``address:port``; False (logged) if the
     port is taken."""
     registry = CollectorRegistry()
-    multiprocess.MultiProcessCollector(registry)
+    registry.register(_LiveProcessesCollector())
     try:
         start_http_server(port, addr=address, registry=registry)
     except OSError as exc:
         log.warning("worker metrics not served on port %d: %s", port, exc)
         return False
     log.info("worker metrics on http://%s:%d/metrics", address, port)
+    return True
+
+
+class _LiveProcessesCollector(multiprocess.MultiProcessCollector):
+    """The sum over the processes' files, once the live gauges of processes that died without a word (a
+    hard time limit, an OOM kill: no ``worker_process_shutdown``) are removed."""
+
+    def __init__(self) -> None:
+        super().__init__(None)  # not registered by the base: the caller registers this one
+
+    def collect(self) -> Any:
+        for path in Path(os.environ[MULTIPROC_ENV]).glob("gauge_live*_*.db"):
+            pid = path.stem.rsplit("_", 1)[-1]
+            if pid.isdigit() and not _alive(int(pid)):
+                multiprocess.mark_process_dead(int(pid))
+        return super().collect()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
     return True
 
 
@@ -174,6 +219,19 @@ def remove(path: Path) -> None:
 # -- a task's run --------------------------------------------------------------------------------------
 
 _started: dict[str, float] = {}
+_job_failures: set[str] = set()
+
+
+def job_failed_in_task(task_id: str, exc: BaseException) -> None:
+    """The task raised ``exc``: if it is a job's own failure (its integration stopped, its request was
+    invalid, its time limit passed: the job's error, reported to its client), the task's outcome is
+    ``job_failed``, not ``failed`` (kept for the unexpected: a bug, a database away)."""
+    from nonholonomic.numerics.integration import IntegrationError
+    from workers.jobs import InvalidJob, NonFiniteResult
+    from workers.limits import JobTimeout
+
+    if isinstance(exc, IntegrationError | InvalidJob | NonFiniteResult | JobTimeout):
+        _job_failures.add(task_id)
 
 
 def task_started(task_id: str, task: str, redelivered: bool) -> None:
@@ -186,7 +244,10 @@ def task_ended(task_id: str, task: str, state: str | None) -> None:
     """A task's run ended with Celery state ``state``: its duration and outcome, the work's tally and
     the process's memory."""
     start = _started.pop(task_id, None)
-    status = {"SUCCESS": "succeeded", "RETRY": "retried", "IGNORED": "succeeded"}.get(state or "", "failed")
+    status = {"SUCCESS": "succeeded", "RETRY": "retried", "IGNORED": "ignored"}.get(state or "", "failed")
+    if status == "failed" and task_id in _job_failures:
+        status = "job_failed"
+    _job_failures.discard(task_id)
     m = metrics()
     if start is not None:
         m.task_duration.labels(task, status).observe(time.perf_counter() - start)

@@ -18,7 +18,7 @@ from workers.ensembles import ENSEMBLE_CHUNK, run_ensemble_chunk
 from workers.job_store import ensemble_store, job_store, write_until_stored
 from workers.jobs import InvalidJob, run_job
 from workers.limits import Deadline, JobTimeout, hard_limit_message, log_thread_stacks, soft_limit_message
-from workers.metrics import job_finished, job_kind
+from workers.metrics import job_finished, job_kind, metrics
 
 #: Seconds between progress updates (and cancellation checks) of a running job.
 PROGRESS_INTERVAL_S = 0.2
@@ -88,8 +88,9 @@ class _JobTask(Task):
     at its hard time limit)."""
 
     def on_failure(self, exc: BaseException, task_id: str, args: Any, kwargs: Any, einfo: Any) -> None:
-        if isinstance(exc, TimeLimitExceeded):
+        if isinstance(exc, TimeLimitExceeded):  # the pool process was killed: no task_postrun counts it
             exc = JobTimeout(hard_limit_message(get_settings().job_time_limit_s))
+            metrics().tasks.labels(self.name, "job_failed").inc()
         if _record_end(task_id, "failed", error={"type": type(exc).__name__, "message": str(exc)}):
             request, _ = request_from_args(args, kwargs)
             job_finished(request, "failed")

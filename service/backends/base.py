@@ -135,6 +135,15 @@ class JobBackend(Protocol):
     def queued_messages(self) -> int:
         """Jobs and ensemble chunks waiting to start."""
 
+    def job_counts(self) -> dict[str, int]:
+        """Jobs in the store by status, for ``/metrics`` (bounded in time: never held by the store)."""
+
+    def live_workers(self) -> int | None:
+        """Workers serving the queue with a live heartbeat (None in embedded mode), for ``/metrics``."""
+
+    def queue_depth(self) -> int:
+        """Messages waiting in the queue, for ``/metrics`` (bounded in time)."""
+
     def health(self) -> dict[str, Any]:
         """Status of the parts this backend depends on; ``ok`` is False if jobs cannot run."""
 

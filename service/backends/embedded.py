@@ -247,8 +247,10 @@ class EmbeddedBackend:
         if event is not None:
             event.set()  # should it ever report progress again, it stops there
         try:
-            self.store.finish(running.job_id, "failed", error={
-                "type": "JobTimeout", "message": abandoned_message(self._hard_limit_s)})
+            request = self.store.get(running.job_id)
+            if self.store.finish(running.job_id, "failed", error={
+                    "type": "JobTimeout", "message": abandoned_message(self._hard_limit_s)}) and request is not None:
+                job_finished(request.request, "failed")
         except Exception:  # the store away: the restart runs the job again
             log.exception("could not record job %s failed at its hard time limit", running.job_id)
         self._give_up(running, "stuck past a job's hard time limit")
@@ -317,6 +319,15 @@ class EmbeddedBackend:
 
     def queued_messages(self) -> int:
         return self._pool.pending()  # jobs and chunks not started by a thread yet
+
+    def job_counts(self) -> dict[str, int]:
+        return self.store.count_by_status()
+
+    def live_workers(self) -> int | None:
+        return None
+
+    def queue_depth(self) -> int:
+        return self.queued_messages()
 
     def health(self) -> dict[str, Any]:
         warm = self._warm.is_set()

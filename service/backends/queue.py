@@ -306,6 +306,16 @@ class QueueBackend:
         return {"ok": detail is None, "mode": self.mode, "broker": broker, "store": store,
                 "queue": self.settings.queue, "workers": workers, **({"detail": detail} if detail else {})}
 
+    def job_counts(self) -> dict[str, int]:
+        """On /health's own connections (a connect timeout of 2 s) within :data:`HEALTH_TIMEOUT_S`."""
+        return self.store.count_by_status(self._health_store, timeout_ms=int(HEALTH_TIMEOUT_S * 1000))
+
+    def live_workers(self) -> int | None:
+        return sum(self.settings.queue in w["queues"] for w in census(self._health_redis).values())
+
+    def queue_depth(self) -> int:
+        return int(self._health_redis.llen(self.settings.queue))
+
     def _ping_store(self) -> bool:
         """Whether the job store answers ``SELECT 1`` (on /health's own connections)."""
         try:

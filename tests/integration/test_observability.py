@@ -179,6 +179,29 @@ def test_jobs_are_counted_once_across_the_pool_seen_as_events_and_followed_by_th
         assert all(x["job_id"] == job_id for x in ended)
 
 
+
+def test_a_job_s_own_failure_is_not_a_task_failure(stack):
+    """A job that fails for its own reason (here a request the worker refuses, sent straight to the broker)
+    is a task that ``job_failed`` and a job ended ``failed``; ``failed`` tasks stay for the unexpected, which
+    the failure-rate alert watches."""
+    simulate = "nonholonomic.simulate"
+    before = _samples(stack["worker_metrics"])
+    sender = Celery(broker=TEST_REDIS_URL)
+    job_id = f"straight-{uuid.uuid4().hex[:8]}"
+    sender.send_task(simulate, args=[{"system": {"kind": "no-such-kind"}, "t_final": 1.0}], task_id=job_id,
+                     queue=stack["queue"])
+
+    def moved(name: str, **labels: str) -> float:
+        return _total(_samples(stack["worker_metrics"]), name, **labels) - _total(before, name, **labels)
+
+    wait_until(lambda: moved("nonholonomic_tasks_total", task=simulate) >= 1, JOB_S, "the refused job's task")
+    assert moved("nonholonomic_tasks_total", task=simulate, status="job_failed") == 1
+    assert moved("nonholonomic_tasks_total", task=simulate, status="failed") == 0
+    assert moved("nonholonomic_jobs_finished_total", kind="other", status="failed") == 1
+    with httpx.Client(base_url=stack["base"], timeout=10) as client:
+        view = client.get(f"/v1/jobs/{job_id}").json()
+    assert view["status"] == "failed" and view["error"]["type"] == "InvalidJob", view
+
 def _spans(text: str) -> list[dict[str, Any]]:
     """The spans OpenTelemetry's console exporter wrote into a log: raw JSON objects (the API's standard
     output) or a worker's log lines that carry them (Celery redirects a pool process's standard output)."""
