@@ -17,6 +17,7 @@ from pathlib import Path
 
 import httpx
 import redis
+from prometheus_client.parser import text_string_to_metric_families
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -211,3 +212,20 @@ def poll_job(client: httpx.Client, location: str, timeout: float = 60.0, interva
         time.sleep(interval)
         interval = max(interval, min(2 * interval, max_interval))
     raise TimeoutError(f"job {location} not finished after {timeout:g} s")
+
+
+#: Each metric sample as ``(name, labels)``: its value.
+Samples = dict[tuple[str, frozenset[tuple[str, str]]], float]
+
+
+def metric_samples(text: str) -> Samples:
+    """The samples of a Prometheus text exposition (``/metrics``)."""
+    return {(sample.name, frozenset(sample.labels.items())): sample.value
+            for family in text_string_to_metric_families(text) for sample in family.samples}
+
+
+def metric_total(samples: Samples | None, name: str, **labels: str) -> float:
+    """The sum of the samples ``name`` whose labels include ``labels`` (others, such as ``pid``, summed over;
+    0 when there are none)."""
+    wanted = set(labels.items())
+    return sum(value for (sample, have), value in (samples or {}).items() if sample == name and wanted <= have)

@@ -113,8 +113,6 @@ def _store(store: EnsembleStore, ensemble_id: str, chunk: int, members: list[dic
            digests: list[Any], worker: str) -> None:
     """Store the chunk's results (until the database takes them); its members are counted in the metrics
     only by the run whose results were kept (:meth:`store.ensembles.EnsembleStore.store_chunk`)."""
-    kept: list[bool] = []
-    write_until_stored(lambda: kept.append(bool(store.store_chunk(ensemble_id, chunk, members, digests, worker))))
-    if kept and kept[-1]:
+    if write_until_stored(lambda: store.store_chunk(ensemble_id, chunk, members, digests, worker)):
         for member in members:
             metrics().members_finished.labels(str(member.get("status", "unknown"))).inc()

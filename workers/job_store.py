@@ -14,7 +14,7 @@ import time
 import uuid
 from collections.abc import Callable
 from functools import lru_cache
-from typing import Any, cast
+from typing import Any, TypeVar, cast
 
 import redis
 from sqlalchemy.exc import OperationalError
@@ -22,6 +22,8 @@ from sqlalchemy.exc import OperationalError
 from schemas.settings import get_settings
 from store.ensembles import EnsembleStore
 from store.jobs import JobStore
+
+T = TypeVar("T")
 
 log = logging.getLogger(__name__)
 
@@ -45,15 +47,14 @@ def ensemble_store() -> EnsembleStore:
     return EnsembleStore(job_store().engine, get_settings().job_ttl_s)
 
 
-def write_until_stored(write: Callable[[], Any], limit_s: float = STORE_RETRY_S) -> None:
-    """Call ``write`` until the database takes it, for up to ``limit_s`` seconds (then raise): a result
-    computed is not thrown away because the database restarts."""
+def write_until_stored(write: Callable[[], T], limit_s: float = STORE_RETRY_S) -> T:
+    """Call ``write`` until the database takes it, for up to ``limit_s`` seconds (then raise), and return
+    what it returned: a result computed is not thrown away because the database restarts."""
     deadline = time.monotonic() + limit_s
     delay = 0.5
     while True:
         try:
-            write()
-            return
+            return write()
         except OperationalError:
             if time.monotonic() > deadline:
                 raise

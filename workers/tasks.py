@@ -78,9 +78,7 @@ def _record_end(job_id: str, status: str, result: dict[str, Any] | None = None,
                 error: dict[str, str] | None = None) -> bool:
     """Write the job's end to the store, retrying while the database is away; True if recorded (False: the
     job had ended already, e.g. run again elsewhere while this worker was cut off, or was cancelled)."""
-    recorded: list[bool] = []
-    write_until_stored(lambda: recorded.append(job_store().finish(job_id, status, result=result, error=error)))
-    return bool(recorded and recorded[-1])
+    return write_until_stored(lambda: job_store().finish(job_id, status, result=result, error=error))
 
 
 class _JobTask(Task):

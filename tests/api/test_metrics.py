@@ -16,12 +16,12 @@ from collections.abc import Iterator
 
 import pytest
 from fastapi.testclient import TestClient
-from prometheus_client.parser import text_string_to_metric_families
 
 from nonholonomic_client.errors import ApiError
 from schemas.settings import get_settings
 from service.main import create_app
 from tests.api.conftest import job
+from tests.support import Samples, metric_samples
 from workers.logs import REQUEST_ID, ContextFilter, formatter, request_id_from
 
 A = {"Authorization": "Bearer alpha-secret"}
@@ -45,17 +45,17 @@ def client(monkeypatch) -> Iterator[TestClient]:
     get_settings.cache_clear()
 
 
-def samples(client: TestClient, headers: dict[str, str] | None = None) -> dict[tuple[str, tuple], float]:
-    """Every sample of ``/metrics`` by (name, sorted labels)."""
+def samples(client: TestClient, headers: dict[str, str] | None = None) -> Samples:
+    """Every sample of ``/metrics``."""
     r = client.get("/metrics", headers=headers or {})
     assert r.status_code == 200, r.text
     assert r.headers["content-type"].startswith("text/plain; version=0.0.4")
-    return {(s.name, tuple(sorted(s.labels.items()))): s.value
-            for family in text_string_to_metric_families(r.text) for s in family.samples}
+    return metric_samples(r.text)
 
 
-def value(found: dict[tuple[str, tuple], float], name: str, **labels: str) -> float:
-    return found.get((name, tuple(sorted(labels.items()))), 0.0)
+def value(found: Samples, name: str, **labels: str) -> float:
+    """The one sample ``name`` with exactly ``labels``."""
+    return found.get((name, frozenset(labels.items())), 0.0)
 
 
 def _wait(client: TestClient, location: str, timeout: float = 120.0) -> dict:
@@ -93,7 +93,8 @@ def test_a_job_moves_its_counters_by_exactly_what_happened(client):
     assert value(after, "nonholonomic_symbolic_pool_size") == get_settings().symbolic_workers
     assert value(after, "nonholonomic_queue_depth", queue=get_settings().queue) == 0
     assert value(after, "nonholonomic_worker_resident_memory_bytes") > 50e6  # this process: > 50 MB with heyoka
-    assert ("http_requests_total", (("handler", "/metrics"), ("method", "GET"), ("status", "200"))) not in after
+    scrapes = frozenset({("handler", "/metrics"), ("method", "GET"), ("status", "200")})
+    assert ("http_requests_total", scrapes) not in after
 
 
 def test_a_cancelled_job_and_an_unknown_route_are_counted_by_template(client):

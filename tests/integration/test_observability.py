@@ -22,11 +22,13 @@ from typing import Any
 import httpx
 import pytest
 from celery import Celery
-from prometheus_client.parser import text_string_to_metric_families
 
 from tests.support import (
     TEST_REDIS_URL,
+    Samples,
     free_port,
+    metric_samples,
+    metric_total,
     poll_job,
     redis_available,
     start_api,
@@ -70,15 +72,8 @@ class Events:
         return {e["type"] for e in list(self.seen) if e.get("uuid") == task_id}
 
 
-def _samples(url: str) -> dict[tuple[str, tuple], float]:
-    text = httpx.get(url, timeout=10).text
-    return {(s.name, tuple(sorted(s.labels.items()))): s.value
-            for family in text_string_to_metric_families(text) for s in family.samples}
-
-
-def _total(found: dict[tuple[str, tuple], float], name: str, **labels: str) -> float:
-    """The sum over the series of ``name`` with ``labels`` (others, such as ``pid``, summed over)."""
-    return sum(v for (n, lab), v in found.items() if n == name and set(labels.items()) <= set(lab))
+def _samples(url: str) -> Samples:
+    return metric_samples(httpx.get(url, timeout=10).text)
 
 
 def _json_lines(path: Path) -> list[dict[str, Any]]:
@@ -137,13 +132,13 @@ def test_jobs_are_counted_once_across_the_pool_seen_as_events_and_followed_by_th
 
     # The worker's metrics: both pool processes' counts, added up, each job once.
     simulate = "nonholonomic.simulate"
-    wait_until(lambda: _total(_samples(stack["worker_metrics"]), "nonholonomic_tasks_total", task=simulate,
-                              status="succeeded") - _total(before, "nonholonomic_tasks_total", task=simulate,
+    wait_until(lambda: metric_total(_samples(stack["worker_metrics"]), "nonholonomic_tasks_total", task=simulate,
+                              status="succeeded") - metric_total(before, "nonholonomic_tasks_total", task=simulate,
                                                           status="succeeded") >= JOBS, 30, "the last task's count")
     after = _samples(stack["worker_metrics"])
 
     def moved(name: str, **labels: str) -> float:
-        return _total(after, name, **labels) - _total(before, name, **labels)
+        return metric_total(after, name, **labels) - metric_total(before, name, **labels)
 
     assert moved("nonholonomic_tasks_total", task=simulate, status="succeeded") == JOBS
     assert moved("nonholonomic_task_duration_seconds_count", task=simulate, status="succeeded") == JOBS
@@ -152,16 +147,16 @@ def test_jobs_are_counted_once_across_the_pool_seen_as_events_and_followed_by_th
     assert moved("nonholonomic_crossings_total") == 0
     pids = {dict(labels)["pid"] for (name, labels) in after if name == "nonholonomic_worker_resident_memory_bytes"}
     assert len(pids) == 2, pids  # the two pool processes, each its own series
-    assert all(100e6 < after[("nonholonomic_worker_resident_memory_bytes", (("pid", pid),))] < 8e9 for pid in pids)
+    assert all(100e6 < metric_total(after, "nonholonomic_worker_resident_memory_bytes", pid=pid) < 8e9 for pid in pids)
 
     # The API's: submitted, in the store, the live worker serving the queue.
     api = _samples(f"{base}/metrics")
-    assert (_total(api, "nonholonomic_jobs_submitted_total", kind="chaplygin_ball")
-            - _total(api_before, "nonholonomic_jobs_submitted_total", kind="chaplygin_ball")) == JOBS
-    assert _total(api, "nonholonomic_jobs", status="succeeded") == JOBS
-    assert _total(api, "nonholonomic_active_jobs") == 0 and _total(api, "nonholonomic_workers_alive") == 1
-    assert _total(api, "nonholonomic_queue_depth", queue=stack["queue"]) == 0
-    assert _total(api, "http_requests_total", handler="/v1/jobs", method="POST", status="202") == JOBS
+    assert (metric_total(api, "nonholonomic_jobs_submitted_total", kind="chaplygin_ball")
+            - metric_total(api_before, "nonholonomic_jobs_submitted_total", kind="chaplygin_ball")) == JOBS
+    assert metric_total(api, "nonholonomic_jobs", status="succeeded") == JOBS
+    assert metric_total(api, "nonholonomic_active_jobs") == 0 and metric_total(api, "nonholonomic_workers_alive") == 1
+    assert metric_total(api, "nonholonomic_queue_depth", queue=stack["queue"]) == 0
+    assert metric_total(api, "http_requests_total", handler="/v1/jobs", method="POST", status="202") == JOBS
 
     # Task events on the broker, as a monitor sees them.
     lifecycle = {"task-sent", "task-received", "task-started", "task-succeeded"}
@@ -192,7 +187,7 @@ def test_a_job_s_own_failure_is_not_a_task_failure(stack):
                      queue=stack["queue"])
 
     def moved(name: str, **labels: str) -> float:
-        return _total(_samples(stack["worker_metrics"]), name, **labels) - _total(before, name, **labels)
+        return metric_total(_samples(stack["worker_metrics"]), name, **labels) - metric_total(before, name, **labels)
 
     wait_until(lambda: moved("nonholonomic_tasks_total", task=simulate) >= 1, JOB_S, "the refused job's task")
     assert moved("nonholonomic_tasks_total", task=simulate, status="job_failed") == 1

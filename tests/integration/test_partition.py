@@ -50,7 +50,6 @@ from typing import Any
 import httpx
 import pytest
 import redis
-from prometheus_client.parser import text_string_to_metric_families
 from sqlalchemy.engine import make_url
 
 from store.ensembles import EnsembleStore
@@ -60,9 +59,12 @@ from tests.support import (
     BIN,
     ROOT,
     TEST_REDIS_URL,
+    Samples,
     drop_database,
     free_port,
     fresh_database_url,
+    metric_samples,
+    metric_total,
     poll_job,
     redis_available,
     wait_healthy,
@@ -143,22 +145,6 @@ def test_a_late_end_leaves_the_task_to_the_worker_that_holds_it_now():
 
 
 # -- the drill ----------------------------------------------------------------------------------------
-
-#: Each metric sample as ``(name, labels)``: its value.
-Samples = dict[tuple[str, frozenset[tuple[str, str]]], float]
-
-
-def _parse(text: str) -> Samples:
-    """The samples of a Prometheus text exposition."""
-    return {(sample.name, frozenset(sample.labels.items())): sample.value
-            for family in text_string_to_metric_families(text) for sample in family.samples}
-
-
-def total(samples: Samples | None, name: str, **labels: str) -> float:
-    """The sum of the samples ``name`` whose labels include ``labels`` (0 when there are none)."""
-    wanted = set(labels.items())
-    return sum(value for (sample, have), value in (samples or {}).items() if sample == name and wanted <= have)
-
 
 def _shown(samples: Samples) -> dict[str, float]:
     """The service's samples, as Prometheus writes them (no histogram buckets, no creation times)."""
@@ -293,7 +279,7 @@ class Deployment:
         """The API's ``GET /metrics`` (no API key in this deployment)."""
         r = self.client.get("/metrics")
         r.raise_for_status()
-        return _parse(r.text)
+        return metric_samples(r.text)
 
     def worker_metrics(self, name: str) -> Samples | None:
         """Worker ``name``'s metrics (on its host's address); None while it cannot be reached."""
@@ -302,10 +288,10 @@ class Deployment:
             r.raise_for_status()
         except httpx.HTTPError:
             return None
-        return _parse(r.text)
+        return metric_samples(r.text)
 
     def alive(self) -> float:
-        return total(self.api_metrics(), "nonholonomic_workers_alive")
+        return metric_total(self.api_metrics(), "nonholonomic_workers_alive")
 
     def event(self, what: str) -> tuple[Samples, dict[str, Samples | None]]:
         """Read the API's and every worker's metrics (not a cut-off host's), print them and keep them for
@@ -385,7 +371,7 @@ def test_a_deployment_replaces_a_cut_off_worker_host_takes_an_added_one_and_its_
     wait_until(lambda: d.warm("a") and d.warm("b"), WARM_S, "workers a and b warm", interval=0.25)
     wait_healthy(d.base, WARM_S)
     ready, _ = d.event("ready: the API, workers a and b")
-    assert total(ready, "nonholonomic_workers_alive") == 2
+    assert metric_total(ready, "nonholonomic_workers_alive") == 2
 
     # 1. An ensemble; worker host b is cut off while it runs a chunk.
     r = client.post("/v1/ensembles", json=ENSEMBLE)
@@ -401,8 +387,8 @@ def test_a_deployment_replaces_a_cut_off_worker_host_takes_an_added_one_and_its_
     d.cut("b")
     assert chunk not in d.store.record(ensemble_id)["done"], "the chunk ended before the cut: make it longer"
     api, _ = d.event(f"ensemble submitted, worker b cut off running chunk {chunk}")
-    assert total(api, "nonholonomic_ensembles_submitted_total", kind="chaplygin_ball") == 1
-    assert total(api, "nonholonomic_queue_depth", queue=d.queue) > 0  # chunks wait for a worker
+    assert metric_total(api, "nonholonomic_ensembles_submitted_total", kind="chaplygin_ball") == 1
+    assert metric_total(api, "nonholonomic_queue_depth", queue=d.queue) > 0  # chunks wait for a worker
     wait_until(lambda: d.alive() == 1, STEP_S, "worker b's heartbeat to expire", interval=0.25)
     d.event("worker b's heartbeat expired")
 
@@ -426,16 +412,18 @@ def test_a_deployment_replaces_a_cut_off_worker_host_takes_an_added_one_and_its_
     record = d.store.record(ensemble_id)
     wait_until(lambda: not d.held(ensemble_id), STEP_S, "every chunk's lease released")
     api, live = d.event("ensemble done on a and c")
-    assert total(api, "nonholonomic_queue_depth", queue=d.queue) == 0
-    assert sum(total(live[name], "nonholonomic_task_redeliveries_total", task=CHUNK_TASK, source="sweeper")
+    assert metric_total(api, "nonholonomic_queue_depth", queue=d.queue) == 0
+    assert sum(metric_total(live[name], "nonholonomic_task_redeliveries_total", task=CHUNK_TASK, source="sweeper")
                for name in ("a", "c")) == 1
-    assert total(live["c"], "nonholonomic_tasks_total", task=CHUNK_TASK, status="succeeded") == workers[d.node("c")]
-    assert total(live["a"], "nonholonomic_tasks_total", task=CHUNK_TASK, status="succeeded") == workers[d.node("a")]
+    assert (metric_total(live["c"], "nonholonomic_tasks_total", task=CHUNK_TASK, status="succeeded")
+            == workers[d.node("c")])
+    assert (metric_total(live["a"], "nonholonomic_tasks_total", task=CHUNK_TASK, status="succeeded")
+            == workers[d.node("a")])
 
     # The link returns: b ends its chunk late, and that changes nothing.
     d.restore("b")
-    ended = total(b_before, "nonholonomic_tasks_total", task=CHUNK_TASK) + 1
-    wait_until(lambda: total(d.worker_metrics("b"), "nonholonomic_tasks_total", task=CHUNK_TASK) >= ended,
+    ended = metric_total(b_before, "nonholonomic_tasks_total", task=CHUNK_TASK) + 1
+    wait_until(lambda: metric_total(d.worker_metrics("b"), "nonholonomic_tasks_total", task=CHUNK_TASK) >= ended,
                ENSEMBLE_S, "worker b to end its chunk late", interval=0.25)
     assert client.get(location).json() == view
     assert d.members(ensemble_id) == members
@@ -443,7 +431,7 @@ def test_a_deployment_replaces_a_cut_off_worker_host_takes_an_added_one_and_its_
     assert not d.held(ensemble_id)
     wait_until(lambda: d.alive() == 3, STEP_S, "worker b's heartbeat again", interval=0.25)
     api, live = d.event("worker b restored: its late chunk ended")
-    assert total(live["b"], "nonholonomic_members_finished_total") == 0  # its results were not kept
+    assert metric_total(live["b"], "nonholonomic_members_finished_total") == 0  # its results were not kept
 
     # 3. Three plain jobs, one on each host (b serves the queue again); host a is cut off running its own.
     locations = []
@@ -457,7 +445,7 @@ def test_a_deployment_replaces_a_cut_off_worker_host_takes_an_added_one_and_its_
     d.cut("a")
     assert d.jobs.status(job_id) == "running", "the job ended before the cut: make it longer"
     api, _ = d.event("three jobs running, worker a cut off running one")
-    assert total(api, "nonholonomic_jobs", status="running") == 3
+    assert metric_total(api, "nonholonomic_jobs", status="running") == 3
     wait_until(lambda: d.alive() == 2, STEP_S, "worker a's heartbeat to expire", interval=0.25)
     d.event("worker a's heartbeat expired")
     views = [poll_job(client, loc, ENSEMBLE_S, interval=0.5) for loc in locations]
@@ -466,19 +454,20 @@ def test_a_deployment_replaces_a_cut_off_worker_host_takes_an_added_one_and_its_
     stored = d.jobs.get(job_id)
     assert stored is not None and stored.attempts == 2  # started on a, then once more on b or c
     api, live = d.event("the three jobs done on b and c")
-    assert total(api, "nonholonomic_jobs", status="succeeded") == 3
-    assert sum(total(live[name], "nonholonomic_task_redeliveries_total", task=JOB_TASK, source="sweeper")
+    assert metric_total(api, "nonholonomic_jobs", status="succeeded") == 3
+    assert sum(metric_total(live[name], "nonholonomic_task_redeliveries_total", task=JOB_TASK, source="sweeper")
                for name in ("b", "c")) == 1
 
     d.restore("a")
-    ended = total(a_before, "nonholonomic_tasks_total", task=JOB_TASK) + 1
-    wait_until(lambda: total(d.worker_metrics("a"), "nonholonomic_tasks_total", task=JOB_TASK) >= ended,
+    ended = metric_total(a_before, "nonholonomic_tasks_total", task=JOB_TASK) + 1
+    wait_until(lambda: metric_total(d.worker_metrics("a"), "nonholonomic_tasks_total", task=JOB_TASK) >= ended,
                ENSEMBLE_S, "worker a to end its job late", interval=0.25)
     assert [client.get(loc).json() for loc in locations] == views
     wait_until(lambda: d.alive() == 3, STEP_S, "worker a's heartbeat again", interval=0.25)
     api, live = d.event("worker a restored: its late job ended")
     # each job and each member counted once, by the run whose end the store kept: not by the late ones
-    assert sum(total(live[name], "nonholonomic_jobs_finished_total", status="succeeded") for name in WORKERS) == 3
-    assert total(live["a"], "nonholonomic_jobs_finished_total") == 0
-    assert sum(total(live[name], "nonholonomic_members_finished_total", status="succeeded")
+    assert sum(metric_total(live[name], "nonholonomic_jobs_finished_total", status="succeeded")
+               for name in WORKERS) == 3
+    assert metric_total(live["a"], "nonholonomic_jobs_finished_total") == 0
+    assert sum(metric_total(live[name], "nonholonomic_members_finished_total", status="succeeded")
                for name in WORKERS) == 2 * CHUNKS
